@@ -1,0 +1,119 @@
+"""In-process speed of the arena against bare PyBullet stepping of the same world.
+
+    python bench/bench_env.py [--seconds 3] [--repeats 5]
+
+Measures decisions per second for 2 v 2 with the full referee in each action space (and
+with LiDAR), and, interleaved in the same run, two baselines on the same PyBullet world with
+the same four robot bodies: ``bare step`` (only ``stepSimulation``, 20 per decision, robots
+moving and colliding) and ``bare drive`` (the least a planar-robot loop must do: set each
+robot's velocity, step, read each pose). Prints a Markdown table and writes
+bench/out/env.json. Medians of ``--repeats`` runs; every configuration is measured in turn
+within each repeat so that machine noise hits them alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import pybullet as pb
+
+from bench.common import machine, rate, table, write_json
+from neuronsmae.server import Arena
+from neuronsmae.server.sim.world import World
+
+CONFIGS = {
+    "continuous": {"action_space": "continuous"},
+    "discrete (0.4 s)": {"action_space": "discrete", "decision_steps": 20},
+    "abstract": {"action_space": "abstract"},
+    "abstract + LiDAR": {"action_space": "abstract", "lidar": True},
+    "abstract, partial obs": {"action_space": "abstract", "observability": "partial"},
+}
+
+
+def arena_runner(options: dict, seed: int = 0):
+    """A closure playing one decision with random available actions; returns 1."""
+    arena = Arena(seed=seed, **options)
+    arena.reset({"level": "easy"})
+    rng = np.random.default_rng(seed)
+    continuous = options["action_space"] == "continuous"
+    n = arena.get_env_info()["n_agents"]
+
+    def one() -> int:
+        if continuous:
+            acts = [np.array([*rng.uniform(-1.5, 1.5, 2), rng.uniform(-1.5, 1.5),
+                              rng.integers(2)]) for _ in range(n)]
+        else:
+            acts = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+        _, _, done, _ = arena.step(acts)
+        if done:
+            arena.reset({"level": "easy"})
+        return 1
+
+    return one
+
+
+def bare_runners(seed: int = 0):
+    """Baselines on the same world: 20 physics steps per 'decision'."""
+    world = World(4)
+    rng = np.random.default_rng(seed)
+    poses = np.array([(1.0, 1.0, 0.0), (1.0, 3.5, 0.0), (7.0, 1.0, math.pi), (7.0, 3.5, 0.0)])
+    world.build(poses)
+    cid, bodies = world.client, world.bodies
+
+    def kick() -> None:
+        for b in bodies:
+            v = rng.uniform(-1.5, 1.5, 2)
+            pb.resetBaseVelocity(b, (v[0], v[1], 0.0), (0.0, 0.0, rng.uniform(-1, 1)),
+                                 physicsClientId=cid)
+
+    def step_only() -> int:
+        kick()
+        for _ in range(20):
+            pb.stepSimulation(physicsClientId=cid)
+        return 1
+
+    def drive() -> int:
+        vel = [(*rng.uniform(-1.5, 1.5, 2), 0.0) for _ in bodies]
+        for _ in range(20):
+            for b, v in zip(bodies, vel, strict=True):
+                pb.resetBaseVelocity(b, v, (0.0, 0.0, 0.5), physicsClientId=cid)
+            pb.stepSimulation(physicsClientId=cid)
+            for b in bodies:
+                pb.getBasePositionAndOrientation(b, physicsClientId=cid)
+        return 1
+
+    return {"bare step": step_only, "bare drive": drive}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    runners = bare_runners() | {name: arena_runner(opts) for name, opts in CONFIGS.items()}
+    samples: dict[str, list[float]] = {name: [] for name in runners}
+    for _ in range(args.repeats):
+        for name, fn in runners.items():
+            samples[name].append(rate(fn, args.seconds, 1)["median"])
+    med = {name: float(np.median(v)) for name, v in samples.items()}
+    rows = []
+    for name, value in med.items():
+        rows.append({
+            "configuration": name,
+            "decisions/s (median)": value,
+            "× real time": value * 0.4,
+            "% of bare step": 100 * value / med["bare step"],
+            "% of bare drive": 100 * value / med["bare drive"],
+            "min": float(min(samples[name])), "max": float(max(samples[name])),
+        })
+    print(table(rows, ["configuration", "decisions/s (median)", "× real time", "% of bare step",
+                       "% of bare drive", "min", "max"]))
+    path = write_json("env", {"rows": rows, "samples": samples, "machine": machine(),
+                              "seconds": args.seconds, "repeats": args.repeats})
+    print(f"\nwrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,154 @@
+"""The wire codec: msgpack with numpy arrays carried as raw bytes, bounded when decoding.
+
+Why msgpack and not pickle: a server must be able to read a payload from anyone without
+running their code, and a client in another language must be able to write one. Why arrays
+as an extension type and not lists of floats: observations and renders are large and must
+round-trip bit for bit (dtype, shape and every byte), which a float list cannot promise.
+
+Extension types (the data of each is itself a msgpack array ``[dtype, shape, data]``):
+
+* ``EXT_NDARRAY`` (1): a ``numpy.ndarray``. ``dtype`` is numpy's type string with its byte
+  order (``"<f4"``, ``"|u1"``, ``"|b1"``); ``shape`` a list of non-negative ints (``[]`` for
+  0-d); ``data`` the C-order bytes, exactly ``prod(shape) * itemsize`` long.
+* ``EXT_SCALAR`` (2): a numpy scalar (``np.float32(1.5)``), same layout with ``shape`` ``[]``;
+  decodes to the numpy scalar, so types survive the trip as well as values.
+
+Only boolean, integer, unsigned, float and complex dtypes are accepted; object, string,
+structured and datetime arrays are refused both ways.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import msgpack
+import numpy as np
+from neuronsmae.protocol.errors import MalformedMessageError, MessageTooLargeError
+
+EXT_NDARRAY = 1
+EXT_SCALAR = 2
+ALLOWED_KINDS = frozenset("biufc")
+"""numpy dtype kinds that may cross the wire: bool, int, uint, float, complex."""
+MAX_NDIM = 32
+MAX_DTYPE_LEN = 16
+
+
+def _dtype_of(text: Any) -> np.dtype:
+    """Parse and vet a wire dtype string; refuse anything that is not plain numbers."""
+    if not isinstance(text, str) or not 0 < len(text) <= MAX_DTYPE_LEN:
+        raise MalformedMessageError(f"array dtype must be a short string, got {text!r}")
+    try:
+        dtype = np.dtype(text)
+    except (TypeError, ValueError) as exc:
+        raise MalformedMessageError(f"unknown array dtype {text!r}") from exc
+    if dtype.kind not in ALLOWED_KINDS or dtype.fields is not None or dtype.subdtype:
+        raise MalformedMessageError(f"array dtype {text!r} is not a plain numeric type")
+    return dtype
+
+
+def _array_payload(array: np.ndarray) -> bytes:
+    if array.dtype.kind not in ALLOWED_KINDS or array.dtype.fields is not None:
+        raise MalformedMessageError(f"cannot encode an array of dtype {array.dtype}")
+    header = [array.dtype.str, list(array.shape)]
+    return msgpack.packb([*header, np.ascontiguousarray(array).tobytes()], use_bin_type=True)
+
+
+def _default(obj: Any) -> Any:
+    """msgpack's hook for everything it does not pack natively (strict_types is on)."""
+    if isinstance(obj, np.ndarray):
+        return msgpack.ExtType(EXT_NDARRAY, _array_payload(obj))
+    if isinstance(obj, np.generic):
+        return msgpack.ExtType(EXT_SCALAR, _array_payload(np.asarray(obj)))
+    if isinstance(obj, tuple):
+        return list(obj)
+    if isinstance(obj, Mapping):
+        return dict(obj)
+    for base in (bool, int, float, str, bytes):  # subclasses such as IntEnum
+        if isinstance(obj, base):
+            return base(obj)
+    raise MalformedMessageError(f"cannot encode a {type(obj).__name__}")
+
+
+def encode(obj: Any) -> bytes:
+    """Pack ``obj`` (None, bool, int, float, str, bytes, lists, tuples, dicts, numpy arrays
+    and scalars) into msgpack bytes; raise ``MalformedMessageError`` for anything else."""
+    try:
+        return msgpack.packb(obj, default=_default, use_bin_type=True, strict_types=True)
+    except MalformedMessageError:
+        raise
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise MalformedMessageError(f"cannot encode message: {exc}") from exc
+
+
+def _unpack_array(data: bytes) -> np.ndarray:
+    """Decode one array extension, checking every field before trusting the length."""
+    try:
+        fields = msgpack.unpackb(data, raw=False, use_list=True, max_array_len=MAX_NDIM + 3)
+    except (ValueError, TypeError, msgpack.UnpackException) as exc:
+        raise MalformedMessageError(f"bad array header: {exc}") from exc
+    if not isinstance(fields, list) or len(fields) != 3:
+        raise MalformedMessageError("array extension must be [dtype, shape, data]")
+    dtype_text, shape, raw = fields
+    dtype = _dtype_of(dtype_text)
+    if not isinstance(shape, list) or len(shape) > MAX_NDIM:
+        raise MalformedMessageError(f"array shape must be a list of at most {MAX_NDIM} ints")
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
+        raise MalformedMessageError(f"array shape must hold non-negative ints, got {shape!r}")
+    if not isinstance(raw, bytes) or math.prod(shape) * dtype.itemsize != len(raw):
+        raise MalformedMessageError(
+            f"array data must be {math.prod(shape)} × {dtype.itemsize} bytes for shape {shape}"
+        )
+    # A copy, so callers get a writable array that does not pin the message buffer.
+    return np.frombuffer(raw, dtype=dtype).reshape(shape).copy()
+
+
+def _ext_hook(code: int, data: bytes) -> Any:
+    if code == EXT_NDARRAY:
+        return _unpack_array(data)
+    if code == EXT_SCALAR:
+        array = _unpack_array(data)
+        if array.ndim != 0:
+            raise MalformedMessageError("a scalar extension must have shape []")
+        return array[()]
+    raise MalformedMessageError(f"unknown msgpack extension type {code}")
+
+
+def decode(data: bytes | bytearray | memoryview, *, max_bytes: int) -> Any:
+    """Unpack one msgpack object of at most ``max_bytes`` bytes.
+
+    Every length msgpack could allocate for (buffer, str, bin, array, map, ext) is capped by
+    ``max_bytes``, so a hostile length prefix cannot make the decoder reserve memory the
+    payload does not contain. Raises ``MessageTooLargeError`` or ``MalformedMessageError``.
+    """
+    size = len(data)
+    if size > max_bytes:
+        raise MessageTooLargeError(f"message of {size} bytes exceeds the limit of {max_bytes}")
+    if size == 0:
+        raise MalformedMessageError("empty message")
+    unpacker = msgpack.Unpacker(
+        raw=False,
+        use_list=True,
+        strict_map_key=False,
+        ext_hook=_ext_hook,
+        max_buffer_size=max_bytes,
+        max_str_len=max_bytes,
+        max_bin_len=max_bytes,
+        max_array_len=max_bytes,
+        max_map_len=max_bytes // 2,
+        max_ext_len=max_bytes,
+    )
+    try:
+        unpacker.feed(data)
+        obj = unpacker.unpack()
+        extra = unpacker.tell() != size
+    except MalformedMessageError:
+        raise
+    except msgpack.OutOfData as exc:
+        raise MalformedMessageError("truncated message") from exc
+    except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
+        raise MalformedMessageError(f"undecodable message: {type(exc).__name__}: {exc}") from exc
+    if extra:
+        raise MalformedMessageError("trailing bytes after the message")
+    return obj

@@ -1,0 +1,99 @@
+"""The typed error hierarchy shared by the in-process arena, the server and the client.
+
+Every error the environment can raise on purpose is a :class:`NeuronsMAEError`. Each has a
+stable wire ``code`` so that a server can send it as an error reply and the client can raise
+the *same* exception type again (see :func:`error_from_code`). Errors caused by bad input
+also subclass :class:`ValueError`, so ``except ValueError`` keeps working for callers that
+only care that the input was wrong.
+"""
+
+from __future__ import annotations
+
+
+class NeuronsMAEError(Exception):
+    """Base class of every error NeuronsMAE raises on purpose."""
+
+    code: str = "error"
+
+
+class InvalidActionError(NeuronsMAEError, ValueError):
+    """An action has the wrong count, type, index, or a value outside its space."""
+
+    code = "invalid_action"
+
+
+class InvalidContextError(NeuronsMAEError, ValueError):
+    """A reset context names an unknown key or a value out of its range."""
+
+    code = "invalid_context"
+
+
+class InvalidOptionError(NeuronsMAEError, ValueError):
+    """An arena option (constructor argument) is unknown or out of range."""
+
+    code = "invalid_option"
+
+
+class ResetNeededError(NeuronsMAEError, RuntimeError):
+    """``step`` was called before ``reset`` or after the episode ended."""
+
+    code = "reset_needed"
+
+
+class VersionMismatchError(NeuronsMAEError):
+    """Client and server speak different protocol versions."""
+
+    code = "version_mismatch"
+
+
+class MessageTooLargeError(NeuronsMAEError, ValueError):
+    """A request exceeds the protocol's size limit."""
+
+    code = "message_too_large"
+
+
+class MalformedMessageError(NeuronsMAEError, ValueError):
+    """A request could not be decoded or lacks a required field."""
+
+    code = "malformed_message"
+
+
+class BusyError(NeuronsMAEError):
+    """The server's episode is owned by another client."""
+
+    code = "busy"
+
+
+class ServerUnavailableError(NeuronsMAEError, ConnectionError):
+    """Nothing answered within the timeout (server dead, unreachable or not started)."""
+
+    code = "unavailable"
+
+
+class ServerError(NeuronsMAEError):
+    """The server failed on a request for a reason that is not the caller's input."""
+
+    code = "server_error"
+
+
+ERRORS: dict[str, type[NeuronsMAEError]] = {
+    cls.code: cls
+    for cls in (
+        NeuronsMAEError,
+        InvalidActionError,
+        InvalidContextError,
+        InvalidOptionError,
+        ResetNeededError,
+        VersionMismatchError,
+        MessageTooLargeError,
+        MalformedMessageError,
+        BusyError,
+        ServerUnavailableError,
+        ServerError,
+    )
+}
+
+
+def error_from_code(code: str, message: str) -> NeuronsMAEError:
+    """Rebuild an exception from its wire code; an unknown code becomes :class:`ServerError`."""
+    return ERRORS.get(code, ServerError)(message)

@@ -1,0 +1,286 @@
+"""Typed request and reply messages, and their msgpack wire form.
+
+A request is one msgpack map: the envelope fields ``v`` (protocol version), ``type`` and
+``session`` plus the fields of the message named by ``type``. A reply is
+``{"ok": true, "value": ...}`` or ``{"ok": false, "code": ..., "message": ...}``, where
+``code`` is a wire code of :mod:`neuronsmae.protocol.errors`. See ``protocol/README.md`` for
+the field-by-field description a client in another language can be written from.
+
+Decoding is strict (no missing, extra or mistyped fields) because a server must turn every
+malformed request into a typed error reply instead of guessing, and because strictness
+within one protocol version is what makes a version bump meaningful.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from neuronsmae.protocol.codec import decode, encode
+from neuronsmae.protocol.errors import (
+    MalformedMessageError,
+    NeuronsMAEError,
+    VersionMismatchError,
+)
+
+PROTOCOL_VERSION = 1
+"""Bumped on any incompatible change to the messages or the codec."""
+MAX_REQUEST_BYTES = 1 << 20
+"""Largest request a server decodes (1 MiB); requests carry actions and options, never
+images, so anything bigger is a mistake or an attack."""
+MAX_REPLY_BYTES = 256 << 20
+"""Largest reply a client decodes (256 MiB; renders and LiDAR observations are big)."""
+NOT_CONFIGURED = "not_configured"
+"""Error code the server sends to a session it has no configuration for (e.g. after a
+restart). Clients answer it by sending ``configure`` again; it never reaches user code."""
+
+
+class NotConfiguredError(NeuronsMAEError):
+    """The session sent a request before ``configure`` (or the server restarted since).
+
+    Not in ``errors.ERRORS`` on purpose: the client handles it by configuring again."""
+
+    code = NOT_CONFIGURED
+
+
+GET_TARGETS = ("obs", "state", "avail_actions", "env_info")
+"""What a ``get`` request may ask for; each maps to the ``ArenaAPI`` method ``get_<what>``."""
+MAX_SEED = 2**63 - 1
+
+
+def rpc_key(port: int) -> str:
+    """The key expression a server on ``port`` serves; the port in it keeps servers apart."""
+    return f"neuronsmae/{port}/rpc"
+
+
+# ---- field checkers: each returns the (possibly normalised) value or raises ----------------
+
+
+def _bad(name: str, expected: str, value: Any) -> MalformedMessageError:
+    return MalformedMessageError(
+        f"field {name!r} must be {expected}, got {type(value).__name__} {value!r:.80}"
+    )
+
+
+def _seed(name: str, value: Any) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise _bad(name, "an integer", value)
+    if not 0 <= int(value) <= MAX_SEED:
+        raise _bad(name, f"in [0, {MAX_SEED}]", value)
+    return int(value)
+
+
+def _optional(check: Callable[[str, Any], Any]) -> Callable[[str, Any], Any]:
+    return lambda name, value: None if value is None else check(name, value)
+
+
+def _str_map(name: str, value: Any) -> dict[str, Any]:
+    if not isinstance(value, dict) or not all(isinstance(key, str) for key in value):
+        raise _bad(name, "a map with string keys", value)
+    return value
+
+
+def _actions(name: str, value: Any) -> list[Any] | np.ndarray:
+    if isinstance(value, np.ndarray) and value.ndim >= 1:
+        return value
+    if not isinstance(value, list):
+        raise _bad(name, "a list or an array with one entry per agent", value)
+    return value
+
+
+def _target(name: str, value: Any) -> str:
+    if value not in GET_TARGETS:
+        raise _bad(name, f"one of {list(GET_TARGETS)}", value)
+    return value
+
+
+def _check(fn: Callable[[str, Any], Any]) -> dict[str, Any]:
+    """Dataclass field metadata naming the wire checker of the field."""
+    return {"check": fn}
+
+
+# ---- requests ------------------------------------------------------------------------------
+
+
+class Message:
+    """Base of every request body; ``TYPE`` is its wire ``type`` string."""
+
+    TYPE: ClassVar[str] = ""
+
+
+@dataclass(frozen=True)
+class Configure(Message):
+    """Claim the server for this session and build its arena from ``seed`` and ``options``.
+
+    ``seed`` None keeps the server's default (its ``--seed``)."""
+
+    TYPE: ClassVar[str] = "configure"
+    seed: int | None = field(default=None, metadata=_check(_optional(_seed)))
+    options: dict[str, Any] = field(default_factory=dict, metadata=_check(_str_map))
+
+
+@dataclass(frozen=True)
+class Reset(Message):
+    """``ArenaAPI.reset(contexts, seed)``."""
+
+    TYPE: ClassVar[str] = "reset"
+    contexts: dict[str, Any] | None = field(default=None, metadata=_check(_optional(_str_map)))
+    seed: int | None = field(default=None, metadata=_check(_optional(_seed)))
+
+
+@dataclass(frozen=True)
+class Step(Message):
+    """``ArenaAPI.step(actions)``."""
+
+    TYPE: ClassVar[str] = "step"
+    actions: Any = field(metadata=_check(_actions))
+
+
+@dataclass(frozen=True)
+class Get(Message):
+    """``ArenaAPI.get_<what>()`` for ``what`` in :data:`GET_TARGETS`."""
+
+    TYPE: ClassVar[str] = "get"
+    what: str = field(metadata=_check(_target))
+
+
+@dataclass(frozen=True)
+class Contexts(Message):
+    """The server's context table: every reset key with its default and range."""
+
+    TYPE: ClassVar[str] = "contexts"
+
+
+@dataclass(frozen=True)
+class Render(Message):
+    """``ArenaAPI.render()``."""
+
+    TYPE: ClassVar[str] = "render"
+
+
+@dataclass(frozen=True)
+class Ping(Message):
+    """Liveness and identity; answered to any session, owner or not."""
+
+    TYPE: ClassVar[str] = "ping"
+
+
+@dataclass(frozen=True)
+class Close(Message):
+    """Give up ownership of the server (the server and its arena keep running)."""
+
+    TYPE: ClassVar[str] = "close"
+
+
+MESSAGES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (Configure, Reset, Step, Get, Contexts, Render, Ping, Close)
+}
+ENVELOPE = ("v", "type", "session")
+
+
+@dataclass(frozen=True)
+class Request:
+    """A decoded request: which session sent which message."""
+
+    body: Message
+    session: str = ""
+
+
+def encode_request(body: Message, session: str = "") -> bytes:
+    """The wire bytes of ``body`` sent by ``session``."""
+    wire = {"v": PROTOCOL_VERSION, "type": body.TYPE, "session": session}
+    wire.update((f.name, getattr(body, f.name)) for f in dataclasses.fields(body))
+    return encode(wire)
+
+
+def decode_request(data: bytes | bytearray | memoryview) -> Request:
+    """Decode and validate a request; raise the typed error the server should reply with.
+
+    The version is checked before anything else, so a client of another version gets
+    ``VersionMismatchError`` rather than a complaint about fields it did not know about.
+    """
+    wire = decode(data, max_bytes=MAX_REQUEST_BYTES)
+    if not isinstance(wire, dict):
+        raise MalformedMessageError(f"a request must be a map, got {type(wire).__name__}")
+    if "v" not in wire:
+        raise MalformedMessageError("request lacks the protocol version field 'v'")
+    version = wire["v"]
+    if type(version) is not int or version != PROTOCOL_VERSION:
+        raise VersionMismatchError(
+            f"client speaks protocol version {version!r}, server speaks {PROTOCOL_VERSION}"
+        )
+    kind = wire.get("type")
+    cls = MESSAGES.get(kind) if isinstance(kind, str) else None
+    if cls is None:
+        raise MalformedMessageError(
+            f"unknown request type {wire.get('type')!r:.40}; known: {sorted(MESSAGES)}"
+        )
+    session = wire.get("session", "")
+    if not isinstance(session, str) or len(session) > 128:
+        raise _bad("session", "a string of at most 128 characters", session)
+    return Request(body=_body(cls, wire), session=session)
+
+
+def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    extra = set(wire) - set(fields) - set(ENVELOPE)
+    if extra:
+        names = sorted(map(repr, extra))[:5]
+        raise MalformedMessageError(f"{cls.TYPE!r} request has unknown fields {names}")
+    values: dict[str, Any] = {}
+    for name, spec in fields.items():
+        if name in wire:
+            values[name] = spec.metadata["check"](name, wire[name])
+        elif spec.default is dataclasses.MISSING and spec.default_factory is dataclasses.MISSING:
+            raise MalformedMessageError(f"{cls.TYPE!r} request lacks field {name!r}")
+    return cls(**values)
+
+
+# ---- replies -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OkReply:
+    """A request succeeded; ``value`` is what the ``ArenaAPI`` method returns."""
+
+    value: Any = None
+
+
+@dataclass(frozen=True)
+class ErrorReply:
+    """A request failed; ``code`` names the error class (see ``errors.ERRORS``)."""
+
+    code: str
+    message: str
+
+    @classmethod
+    def from_exception(cls, exc: NeuronsMAEError) -> ErrorReply:
+        return cls(code=exc.code, message=str(exc))
+
+
+Reply = OkReply | ErrorReply
+
+
+def encode_reply(reply: Reply) -> bytes:
+    """The wire bytes of a reply; an unencodable value raises ``MalformedMessageError``."""
+    if isinstance(reply, OkReply):
+        return encode({"ok": True, "value": reply.value})
+    return encode({"ok": False, "code": reply.code, "message": reply.message})
+
+
+def decode_reply(data: bytes | bytearray | memoryview) -> Reply:
+    """Decode a reply; a reply that is not one raises ``MalformedMessageError``."""
+    wire = decode(data, max_bytes=MAX_REPLY_BYTES)
+    if isinstance(wire, dict) and wire.get("ok") is True and set(wire) == {"ok", "value"}:
+        return OkReply(wire["value"])
+    if (
+        isinstance(wire, dict)
+        and wire.get("ok") is False
+        and isinstance(wire.get("code"), str)
+        and isinstance(wire.get("message"), str)
+    ):
+        return ErrorReply(wire["code"], wire["message"])
+    raise MalformedMessageError("the server's reply is not a valid reply map")

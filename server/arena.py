@@ -1,0 +1,327 @@
+"""The in-process arena: one RMUA battle, stepped decision by decision.
+
+:class:`Arena` wires the parts together and owns nothing else: the PyBullet world
+(:mod:`~neuronsmae.server.sim.world`), the chassis model (:mod:`~neuronsmae.server.sim.chassis`),
+the referee (:mod:`~neuronsmae.server.sim.referee`), and the task layer (actions, perception,
+observations, bots, planner under :mod:`neuronsmae.server.task`). Its public methods are the
+:class:`~neuronsmae.protocol.interface.ArenaAPI` contract shared with the remote client.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from neuronsmae.protocol.errors import ResetNeededError
+from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.server.config import ArenaConfig
+from neuronsmae.server.contexts import EpisodeContext, parse_contexts
+from neuronsmae.server.render import render_scene
+from neuronsmae.server.sim import field as F
+from neuronsmae.server.sim.chassis import Chassis, ChassisParams
+from neuronsmae.server.sim.referee import BLUE, RED, Referee, StepTally
+from neuronsmae.server.sim.spawn import corner_poses, random_poses
+from neuronsmae.server.sim.world import World
+from neuronsmae.server.task import observations as O
+from neuronsmae.server.task import perception as P
+from neuronsmae.server.task.actions import (
+    KIND_CMD,
+    KIND_GOAL,
+    ActionDecoder,
+    Intent,
+    heading_rate,
+    n_actions,
+)
+from neuronsmae.server.task.bots import BotView, make_bot
+from neuronsmae.server.task.planner import Planner, follow
+
+CONTROL_EVERY = 5
+"""Physics steps between controller updates (0.1 s): the planner's velocity command and the
+auto-turn are recomputed this often and held in between, like the released build's 0.1 s
+discrete decisions."""
+
+
+class Arena(ArenaAPI):
+    """One battle on the RMUA field, simulated in this process.
+
+    ``Arena(seed=1234, action_space="abstract", n_blue=2, n_red=2, mode="cooperative", ...)``;
+    every option is a field of :class:`~neuronsmae.server.config.ArenaConfig` and is listed
+    in ``docs/options.md``. Each arena owns its own RNG (seeded by ``seed``) and its own
+    PyBullet client, so several arenas in one process never interfere.
+    """
+
+    def __init__(self, seed: int = 1234, **options: Any) -> None:
+        self.config = cfg = ArenaConfig.from_options(options)
+        self.seed = int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.n_blue, self.n_red = cfg.n_blue, cfg.n_red
+        self.n = cfg.n_blue + cfg.n_red
+        self.team = np.array([BLUE] * cfg.n_blue + [RED] * cfg.n_red)
+        self.mates_of = [self._mates(i) for i in range(self.n)]
+        self.enemies_of = [np.flatnonzero(self.team != self.team[i]) for i in range(self.n)]
+        self.agents = self._controlled(cfg.mode)
+        self.world = World(self.n)
+        self.chassis = Chassis(self.n)
+        self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
+        self.planner = Planner(resolution=cfg.planner_resolution)
+        self.decoder = ActionDecoder(cfg.action_space, cfg.n_red, cfg.k, cfg.clip_actions)
+        self.poses = np.zeros((self.n, 3))
+        self.t = 0
+        self.done = True
+        self._episodes = 0
+        self._obs: list[np.ndarray] = []
+        self.context = EpisodeContext()
+        self.targets = np.zeros(self.n, dtype=np.int64)
+        self.cmd = np.zeros((self.n, 3))
+        self.bots: dict[int, Any] = {BLUE: None, RED: None}
+
+    # --- construction helpers -----------------------------------------------------------
+    def _mates(self, i: int) -> np.ndarray:
+        same = np.flatnonzero(self.team == self.team[i])
+        return np.concatenate([[i], same[same != i]]).astype(int)
+
+    def _controlled(self, mode: str) -> np.ndarray:
+        return {
+            "cooperative": np.arange(self.n_blue),
+            "competitive": np.arange(self.n),
+            "bots": np.arange(0),
+        }[mode]
+
+    # --- ArenaAPI -------------------------------------------------------------------------
+    def reset(
+        self, contexts: Mapping[str, Any] | None = None, seed: int | None = None
+    ) -> list[np.ndarray]:
+        self.context = ctx = parse_contexts(contexts)
+        if seed is not None:
+            self.rng = np.random.default_rng(int(seed))
+            self.referee.rng = self.rng
+        cfg = self.config
+        if cfg.spawn == "random":
+            self.poses = random_poses(self.n, self.rng)
+        else:
+            self.poses = corner_poses(self.n_blue, self.n_red, self.rng)
+        self.world.build(self.poses)
+        params = [
+            ChassisParams(**(ctx.blue_dynamics if self.team[i] == BLUE else ctx.red_dynamics))
+            for i in range(self.n)
+        ]
+        self.chassis.reset(params)
+        max_hp = np.where(self.team == RED, ctx.opponent_hp, float(F.START_HP))
+        self.referee.reset(max_hp, ctx.coef)
+        self.bots = {
+            BLUE: make_bot(cfg.blue_level, self.rng) if cfg.mode == "bots" else None,
+            RED: make_bot(ctx.level, self.rng) if cfg.mode == "cooperative" or cfg.mode == "bots"
+            else None,
+        }
+        self.t = 0
+        self.done = False
+        self._episodes += 1
+        self.targets = np.array([self._nearest_enemy(i) for i in range(self.n)])
+        self.cmd = np.zeros((self.n, 3))
+        self._perceive()
+        return self.get_obs()
+
+    def step(
+        self, actions: Sequence[Any]
+    ) -> tuple[list[np.ndarray], list[float], bool, dict[str, Any]]:
+        if self.done:
+            raise ResetNeededError(
+                "step() called before reset() or after the episode ended; call reset() first"
+            )
+        checked = self.decoder.validate(actions, len(self.agents))
+        intents = self._intents(checked)
+        paths = self._plan(intents)
+        tally = StepTally.zero()
+        for k in range(self.config.period):
+            if k % CONTROL_EVERY == 0:
+                self._control(intents, paths)
+            self._physics_step(tally)
+            if self.done:
+                break
+        team_r, parts = self.referee.team_rewards(tally, self.config.reward == "dense")
+        self._perceive()
+        rewards = [float(team_r[self.team[i]]) for i in self.agents]
+        info = self.referee.info() | {
+            "t": self.t, "components": parts, "team_reward": team_r.tolist(),
+            "targets": self.targets.tolist(),
+        }
+        return self.get_obs(), rewards, self.done, info
+
+    def get_obs(self) -> list[np.ndarray]:
+        return [o.copy() for o in self._obs]
+
+    def get_state(self) -> np.ndarray:
+        ref = self.referee
+        return O.global_state(
+            O.norm_pose(self.poses), O.norm_hp(ref.hp, ref.max_hp), O.norm_bullets(ref.bullets),
+            O.norm_time(self.t, self.config.episode_steps),
+        )
+
+    def get_avail_actions(self) -> list[np.ndarray]:
+        alive = self.referee.alive
+        return [
+            self.decoder.mask(bool(alive[i]), alive[self.enemies_of[i]], self.valid[i])
+            for i in self.agents
+        ]
+
+    def get_env_info(self) -> dict[str, Any]:
+        cfg = self.config
+        # Agents are blue robots, or (competitive, equal teams) any robot: one layout fits all.
+        n_team, n_enemy = self.n_blue, self.n_red
+        return {
+            "n_actions": n_actions(cfg.action_space, n_enemy, cfg.k),
+            "n_agents": len(self.agents),
+            "state_shape": O.state_size(self.n),
+            "obs_shape": O.obs_size(n_team, n_enemy, cfg.k, cfg.with_candidates,
+                                    cfg.vector_obs, cfg.lidar),
+            "episode_limit": -(-cfg.episode_steps // cfg.period),
+            "action_space": cfg.action_space,
+            "agents": [self.agent_name(i) for i in self.agents],
+            "n_enemies": n_enemy,
+            "decision_steps": cfg.period,
+            "mode": cfg.mode,
+        }
+
+    def render(self) -> np.ndarray:
+        if not self._obs:
+            raise ResetNeededError("render() needs a scene: call reset() first")
+        return render_scene(self)
+
+    def close(self) -> None:
+        self.world.close()
+        self.done = True
+
+    # --- scenes ---------------------------------------------------------------------------
+    def place(self, poses: np.ndarray, bullets: Sequence[float] | None = None) -> list[np.ndarray]:
+        """Teleport every robot to ``poses`` (N, 3) mid-episode and return fresh observations.
+
+        For constructed scenes (tests, tutorials, curriculum starts): wheel states and HP are
+        kept, velocities zeroed; ``bullets`` optionally overrides each robot's ammunition.
+        """
+        if self.done:
+            raise ResetNeededError("place() needs a running episode: call reset() first")
+        poses = np.asarray(poses, dtype=np.float64).reshape(self.n, 3)
+        for i in range(self.n):
+            self.world.place(i, *poses[i])
+        self.poses[:] = poses
+        if bullets is not None:
+            self.referee.bullets[:] = np.asarray(bullets, dtype=np.float64)
+        self.targets[:] = [self._nearest_enemy(i) for i in range(self.n)]
+        self._perceive()
+        return self.get_obs()
+
+    # --- helpers --------------------------------------------------------------------------
+    def agent_name(self, i: int) -> str:
+        """``blue_0``, ``red_1``, ... for robot ``i``."""
+        team = "blue" if self.team[i] == BLUE else "red"
+        return f"{team}_{i if team == 'blue' else i - self.n_blue}"
+
+    def _nearest_enemy(self, i: int) -> int:
+        enemies = self.enemies_of[i]
+        live = enemies[self.referee.alive[enemies]]
+        if live.size == 0:
+            return int(enemies[0])
+        d = np.hypot(*(self.poses[live, :2] - self.poses[i, :2]).T)
+        return int(live[np.argmin(d)])
+
+    def _wanted(self) -> np.ndarray:
+        """Robots whose candidate points are needed: observed abstract agents and bots."""
+        wanted = np.zeros(self.n, dtype=bool)
+        if self.config.with_candidates or self.config.action_space == "abstract":
+            wanted[self.agents] = True
+        for team, bot in self.bots.items():
+            if bot is not None:
+                wanted[self.team == team] = True
+        return wanted
+
+    def _perceive(self) -> None:
+        """Candidate points, sight and observations for the decision about to be taken."""
+        cfg, ref = self.config, self.referee
+        self.cands, self.valid = P.all_candidates(
+            self.poses, ref.alive, self.enemies_of, cfg.k, self._wanted()
+        )
+        seen = P.sight(self.poses, ref.alive, self.targets, self.enemies_of,
+                       np.deg2rad(cfg.camera_hfov_deg), cfg.observability == "partial")
+        poses_n = O.norm_pose(self.poses)
+        hp_n = O.norm_hp(ref.hp, ref.max_hp)
+        bul_n = O.norm_bullets(ref.bullets)
+        t_n = O.norm_time(self.t, cfg.episode_steps)
+        obs = []
+        for i in self.agents:
+            parts = []
+            if cfg.vector_obs:
+                order = np.concatenate([self.mates_of[i], self.enemies_of[i]])
+                cands_n = O.norm_xy(self.cands[i]) if cfg.with_candidates else None
+                parts.append(O.vector_obs(order, len(self.mates_of[i]), poses_n, cands_n, t_n,
+                                          hp_n, bul_n, seen[i], cfg.unseen_value))
+            if cfg.lidar:
+                parts.append(P.lidar(self.poses, i, cfg.lidar_range))
+            obs.append(np.concatenate(parts).astype(np.float32))
+        self._obs = obs
+
+    def _intents(self, actions: list[Any]) -> list[Intent]:
+        """Per-robot intents from the agents' actions and the bots' choices."""
+        intents: list[Intent | None] = [None] * self.n
+        for a, i in zip(actions, self.agents, strict=True):
+            intents[i] = self.decoder.decode(a, self.enemies_of[i], self.cands[i])
+        for team, bot in self.bots.items():
+            if bot is None:
+                continue
+            robots = np.flatnonzero(self.team == team)
+            if not self.referee.alive[robots].any():
+                continue
+            view = BotView(robots, self.enemies_of[robots[0]], self.poses, self.referee.hp,
+                           self.referee.max_hp, self.referee.alive, self.cands[robots],
+                           self.valid[robots])
+            for r, (e, c) in zip(robots, bot.act(view), strict=True):
+                intents[r] = Intent(int(self.enemies_of[r][e]), KIND_GOAL,
+                                    goal=self.cands[r, e, c])
+        result = []
+        for i, intent in enumerate(intents):
+            assert intent is not None
+            if not self.referee.alive[intent.target]:
+                intent.target = self._nearest_enemy(i)
+            self.targets[i] = intent.target
+            result.append(intent)
+        return result
+
+    def _plan(self, intents: list[Intent]) -> list[np.ndarray | None]:
+        xy = self.poses[:, :2]
+        paths: list[np.ndarray | None] = []
+        for i, intent in enumerate(intents):
+            if intent.kind == KIND_GOAL and self.referee.alive[i]:
+                paths.append(self.planner.plan(xy[i], intent.goal, np.delete(xy, i, axis=0)))
+            else:
+                paths.append(None)
+        return paths
+
+    def _control(self, intents: list[Intent], paths: list[np.ndarray | None]) -> None:
+        """Velocity commands (body frame) from the intents, held until the next update."""
+        alive = self.referee.alive
+        for i, intent in enumerate(intents):
+            if not alive[i]:
+                self.cmd[i] = 0.0
+                continue
+            x, y, yaw = self.poses[i]
+            if intent.kind == KIND_CMD:
+                self.cmd[i] = intent.vel
+                continue
+            if intent.kind == KIND_GOAL:
+                vf, vl = follow((x, y, yaw), paths[i], intent.goal)
+            else:
+                vf, vl = intent.vel[0], intent.vel[1]
+            tx, ty = self.poses[intent.target, :2]
+            self.cmd[i] = (vf, vl, heading_rate(yaw, x, y, tx, ty))
+
+    def _physics_step(self, tally: StepTally) -> None:
+        ref = self.referee
+        vel = self.chassis.step(self.cmd)
+        self.world.step(self.poses, vel, ref.alive)
+        was_alive = ref.alive.copy()
+        ref.physics_step(self.poses, self.targets, tally)
+        for i in np.flatnonzero(was_alive & ~ref.alive):
+            self.chassis.stop(int(i))
+            self.cmd[i] = 0.0
+        self.t += 1
+        self.done = ref.check_end(self.t, self.config.episode_steps)

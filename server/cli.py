@@ -1,0 +1,135 @@
+"""``neuronsmae-server``: serve one arena over Zenoh on one TCP port.
+
+    neuronsmae-server --port 10000 --seed 1234 [--time-scale 100] [--no-graphics]
+                      [--host 127.0.0.1]
+
+Exit status: 0 after a SIGTERM/SIGINT shutdown, 2 when the port is taken or the arguments
+are wrong, 1 when the arena or Zenoh fails to start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections.abc import Sequence
+
+import zenoh
+from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.server.rpc import (
+    Interrupted,
+    PortInUseError,
+    RpcServer,
+    StopSignal,
+    check_port,
+    watch_parent,
+)
+from neuronsmae.server.service import DEFAULT_LEASE_S, ArenaService
+
+log = logging.getLogger("neuronsmae.server")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="neuronsmae-server", description="Serve one NeuronsMAE arena over Zenoh."
+    )
+    p.add_argument("--port", type=int, default=10000, help="TCP port to listen on (10000)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=1234,
+        help="arena seed used until a client configures its own (1234)",
+    )
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=100.0,
+        help="cap on simulated/real time ratio; 0 = unlimited (100)",
+    )
+    p.add_argument(
+        "--no-graphics",
+        action="store_true",
+        help="accepted for compatibility; the arena always runs headless",
+    )
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (127.0.0.1; 0.0.0.0 for remote clients)",
+    )
+    p.add_argument(
+        "--lease",
+        type=float,
+        default=DEFAULT_LEASE_S,
+        help="seconds of silence after which another client may take over (60)",
+    )
+    p.add_argument(
+        "--log-level",
+        default="WARNING",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        type=str.upper,
+        help="logging level (WARNING)",
+    )
+    p.add_argument("--watch-parent", type=int, default=None, help=argparse.SUPPRESS)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console entry point: :func:`run`, then leave at once when run as a program.
+
+    Called without ``argv`` (as the ``neuronsmae-server`` script or ``python -m``), the
+    process exits straight after the orderly shutdown (arena and Zenoh session closed, logs
+    flushed) instead of through interpreter teardown: finalising numba and PyBullet takes
+    about half a second, which would break the promise of stopping within 1 s of SIGTERM.
+    """
+    status = run(argv)
+    if argv is None:
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
+def run(argv: Sequence[str] | None = None) -> int:
+    """Run the server until SIGTERM/SIGINT; return the process exit status."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        stream=sys.stderr,
+        level=args.log_level,
+        format="neuronsmae-server[%(process)d] %(levelname)s: %(message)s",
+    )
+    if not 0 < args.port < 65536 or args.time_scale < 0:
+        log.error("--port must be in 1..65535 and --time-scale >= 0")
+        return 2
+    stop = StopSignal()
+    stop.install()
+    if args.watch_parent is not None:
+        watch_parent(args.watch_parent)
+    try:
+        check_port(args.host, args.port)
+        return _serve(args, stop)
+    except PortInUseError as exc:
+        log.error("%s; stop the server using it or choose another --port", exc)
+        return 2
+    except Interrupted:
+        return 0
+    except (OSError, zenoh.ZError, NeuronsMAEError) as exc:
+        log.error("cannot start: %s", exc)
+        return 1
+
+
+def _serve(args: argparse.Namespace, stop: StopSignal) -> int:
+    from neuronsmae.server.arena import Arena  # heavy (PyBullet, numba): after the port check
+    from neuronsmae.server.contexts import context_table
+
+    service = ArenaService(
+        Arena,
+        seed=args.seed,
+        time_scale=args.time_scale,
+        lease_s=args.lease,
+        context_table=context_table,
+    )
+    with service, RpcServer(service, args.host, args.port, stop) as server:
+        server.serve_forever()
+    return 0

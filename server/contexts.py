@@ -1,0 +1,150 @@
+"""Per-episode contexts: dynamics, referee and opponent parameters given to ``reset``.
+
+The keys keep the released build's names so the original scripts' dictionaries
+(``{"coef": 0.5, "level": 1.0}``, ``{"VK1": 0.0375, "level": 0}``) work unchanged. Dynamics
+keys apply to the learning team (blue); the same key behind ``opponent.`` (for example
+``"opponent.VK1"``) applies to the red team. Keys left out take their defaults, so an
+episode is described completely by its seed and contexts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from neuronsmae.protocol.errors import InvalidContextError
+
+
+@dataclass(frozen=True)
+class ContextKey:
+    """One row of the context table."""
+
+    name: str
+    default: float
+    lo: float
+    hi: float
+    doc: str
+    chassis_field: str | None = None
+    """The ``ChassisParams`` field this key sets, for dynamics keys."""
+
+
+DYNAMICS_KEYS: tuple[ContextKey, ...] = (
+    ContextKey("Friction_coeff", 0.1, 0.0, 2.0, "sliding friction μ (rolling is 0.8μ)",
+               "friction_coeff"),
+    ContextKey("KP", 8.0, 0.0, 200.0, "wheel PID proportional gain", "kp"),
+    ContextKey("KI", 0.0, 0.0, 200.0, "wheel PID integral gain", "ki"),
+    ContextKey("KD", 2.0, 0.0, 200.0, "wheel PID derivative gain", "kd"),
+    ContextKey("VK1", 0.375, 1e-4, 10.0, "motor torque constant (motor character)", "vk1"),
+    ContextKey("M", 3.4, 0.1, 100.0, "mass in the wheel model (kg)", "m"),
+    ContextKey("Wheel_I", 0.0125, 1e-4, 1.0, "wheel rotational inertia (kg m²)", "wheel_i"),
+    ContextKey("vx_dt", 0.0, 0.0, 2.0, "lateral command delay (s)", "vx_dt"),
+    ContextKey("vy_dt", 0.0, 0.0, 2.0, "forward command delay (s)", "vy_dt"),
+    ContextKey("vw_dt", 0.0, 0.0, 2.0, "yaw-rate command delay (s)", "vw_dt"),
+)
+OTHER_KEYS: tuple[ContextKey, ...] = (
+    ContextKey("coef", 1.0, 0.0, 10.0, "multiplies the damage the red team deals"),
+    ContextKey("opponent_hp", 600.0, 1.0, 10000.0, "starting HP of each red robot"),
+    ContextKey("opponent_speed", 1.0, 0.1, 3.0, "multiplies the red robots' velocity commands"),
+)
+LEVELS: dict[Any, str] = {
+    0: "easy", 1: "middle", 2: "hard",
+    "easy": "easy", "middle": "middle", "hard": "hard", "random": "random",
+}
+"""Accepted ``level`` values: numbers 0/1/2 (also as floats) or names."""
+DEFAULT_LEVEL = "easy"
+OPPONENT_PREFIX = "opponent."
+
+CONTEXT_TABLE: dict[str, ContextKey] = {k.name: k for k in DYNAMICS_KEYS + OTHER_KEYS}
+CONTEXT_TABLE.update({OPPONENT_PREFIX + k.name: k for k in DYNAMICS_KEYS})
+
+
+@dataclass(frozen=True)
+class EpisodeContext:
+    """Validated contexts of one episode."""
+
+    blue_dynamics: dict[str, float] = field(default_factory=dict)
+    """ChassisParams keyword values for blue robots."""
+    red_dynamics: dict[str, float] = field(default_factory=dict)
+    """ChassisParams keyword values for red robots (speed scaling included)."""
+    coef: float = 1.0
+    opponent_hp: float = 600.0
+    level: str = DEFAULT_LEVEL
+
+    def to_dict(self) -> dict[str, Any]:
+        """The contexts as given to reset (released names), for records and replays."""
+        out: dict[str, Any] = {"coef": self.coef, "opponent_hp": self.opponent_hp,
+                               "level": self.level}
+        for key in DYNAMICS_KEYS:
+            assert key.chassis_field is not None
+            out[key.name] = self.blue_dynamics[key.chassis_field]
+            out[OPPONENT_PREFIX + key.name] = self.red_dynamics[key.chassis_field]
+        out["opponent_speed"] = self.red_dynamics["speed_scale"]
+        return out
+
+
+def context_table() -> list[dict[str, Any]]:
+    """The table of keys, defaults, ranges and meanings (served to remote clients)."""
+    rows = [
+        {"key": name, "default": k.default, "min": k.lo, "max": k.hi, "doc": k.doc}
+        for name, k in CONTEXT_TABLE.items()
+    ]
+    rows.append({"key": "level", "default": DEFAULT_LEVEL, "choices": sorted(map(str, LEVELS)),
+                 "doc": "opponent bot: 0/easy, 1/middle, 2/hard, or random"})
+    return rows
+
+
+def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
+    """Validate a reset's contexts; raise InvalidContextError naming the key and what is valid."""
+    contexts = dict(contexts or {})
+    if not all(isinstance(key, str) for key in contexts):
+        raise InvalidContextError("context keys must be strings")
+    values: dict[str, float] = {}
+    level = DEFAULT_LEVEL
+    for key, value in contexts.items():
+        if key == "level":
+            level = _parse_level(value)
+            continue
+        spec = CONTEXT_TABLE.get(key)
+        if spec is None:
+            valid = sorted([*CONTEXT_TABLE, "level"])
+            raise InvalidContextError(f"unknown context key {key!r}; valid keys: {valid}")
+        values[key] = _check_value(key, value, spec)
+    blue = {k.chassis_field: values.get(k.name, k.default) for k in DYNAMICS_KEYS}
+    red = {
+        k.chassis_field: values.get(OPPONENT_PREFIX + k.name, k.default) for k in DYNAMICS_KEYS
+    }
+    red["speed_scale"] = values.get("opponent_speed", 1.0)
+    return EpisodeContext(
+        blue_dynamics=blue,  # type: ignore[arg-type]
+        red_dynamics=red,  # type: ignore[arg-type]
+        coef=values.get("coef", 1.0),
+        opponent_hp=values.get("opponent_hp", 600.0),
+        level=level,
+    )
+
+
+def _check_value(key: str, value: Any, spec: ContextKey) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InvalidContextError(
+            f"context {key!r} must be a number in [{spec.lo}, {spec.hi}], got {value!r}"
+        )
+    value = float(value)
+    if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
+        raise InvalidContextError(
+            f"context {key!r}={value!r} is out of range; valid: [{spec.lo}, {spec.hi}]"
+        )
+    return value
+
+
+def _parse_level(value: Any) -> str:
+    key = value
+    if isinstance(value, float) and value.is_integer():
+        key = int(value)
+    if isinstance(key, bool) or not isinstance(key, (int, str)) or key not in LEVELS:
+        raise InvalidContextError(
+            f"context 'level'={value!r} is not valid; choose 0, 1, 2 or one of "
+            f"{sorted(k for k in LEVELS if isinstance(k, str))}"
+        )
+    return LEVELS[key]

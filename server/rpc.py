@@ -1,0 +1,168 @@
+"""The Zenoh half of the server: one queryable, answered from the main thread.
+
+Why the main thread: the arena (PyBullet, numba) is not thread-safe and every request must
+see the state the previous one left, so requests are taken one at a time from the
+queryable's FIFO channel and answered in order. ``Queryable.recv`` polls for signals while
+it blocks, which is how SIGTERM/SIGINT reach :class:`StopSignal` promptly.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import logging
+import os
+import signal
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from types import FrameType
+
+import zenoh
+from neuronsmae.protocol.errors import MessageTooLargeError, NeuronsMAEError
+from neuronsmae.protocol.messages import MAX_REQUEST_BYTES, ErrorReply, encode_reply, rpc_key
+from neuronsmae.protocol.transport import endpoint, server_config
+from neuronsmae.server.service import ArenaService
+
+log = logging.getLogger("neuronsmae.server")
+
+
+class PortInUseError(NeuronsMAEError, OSError):
+    """The server's TCP port is taken by another process."""
+
+    code = "port_in_use"
+
+
+class Interrupted(BaseException):
+    """Raised by the signal handler to leave a blocking wait; not an error."""
+
+
+class StopSignal:
+    """Turns SIGTERM/SIGINT into an orderly stop.
+
+    While a request is being answered (:meth:`critical`) a signal only sets
+    :attr:`requested`, so the reply still goes out and the arena is never left mid-step;
+    anywhere else (blocked in ``recv``, building the arena at startup) it raises
+    :class:`Interrupted` to return at once.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._interruptible = True
+
+    def install(self) -> None:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._handler)
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        log.info("received %s, shutting down", signal.Signals(signum).name)
+        self.requested = True
+        if self._interruptible:
+            raise Interrupted
+
+    @contextlib.contextmanager
+    def critical(self) -> Iterator[None]:
+        self._interruptible = False
+        try:
+            yield
+        finally:
+            self._interruptible = True
+
+
+def check_port(host: str, port: int) -> None:
+    """Raise PortInUseError if something already listens on ``host:port``.
+
+    Zenoh's own bind failure is caught too (see :class:`RpcServer`); checking first gives a
+    clear message before the slow arena build rather than after it. SO_REUSEADDR makes the
+    probe ignore connections lingering in TIME_WAIT, so only a live listener counts.
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host.strip("[]"), port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise PortInUseError(f"port {port} on {host} is already in use") from exc
+            raise
+
+
+def watch_parent(parent_pid: int, period: float = 0.25) -> None:
+    """SIGTERM this process when ``parent_pid`` is gone, so a launched server never outlives
+    the client that launched it (even if that client is killed without closing)."""
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(period)
+        log.info("parent process %d exited", parent_pid)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
+
+
+class RpcServer:
+    """Serves an :class:`ArenaService` on ``neuronsmae/<port>/rpc`` at ``tcp/host:port``."""
+
+    def __init__(self, service: ArenaService, host: str, port: int, stop: StopSignal) -> None:
+        self.service = service
+        self.host, self.port = host, port
+        self.key = rpc_key(port)
+        self._stop = stop
+        self._session: zenoh.Session | None = None
+        self._queryable: zenoh.Queryable | None = None
+
+    def __enter__(self) -> RpcServer:
+        try:
+            self._session = zenoh.open(server_config(self.host, self.port))
+        except zenoh.ZError as exc:
+            if "in use" in str(exc):
+                raise PortInUseError(f"port {self.port} on {self.host} is already in use") from exc
+            raise
+        try:
+            self._queryable = self._session.declare_queryable(self.key)
+        except BaseException:
+            self.close()
+            raise
+        log.info("serving %s on %s", self.key, endpoint(self.host, self.port))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Undeclare and close the session; safe to call twice."""
+        queryable, self._queryable = self._queryable, None
+        session, self._session = self._session, None
+        if queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                queryable.undeclare()
+        if session is not None:
+            with contextlib.suppress(zenoh.ZError):
+                session.close()
+
+    def serve_forever(self) -> None:
+        """Answer queries until a stop signal arrives."""
+        assert self._queryable is not None, "use RpcServer as a context manager"
+        queryable = self._queryable
+        try:
+            while not self._stop.requested:
+                query = queryable.recv()
+                with self._stop.critical(), query:
+                    self._answer(query)
+        except Interrupted:
+            pass
+
+    def _answer(self, query: zenoh.Query) -> None:
+        payload = query.payload
+        if payload is not None and len(payload) > MAX_REQUEST_BYTES:
+            error = MessageTooLargeError(
+                f"request of {len(payload)} bytes exceeds the limit of {MAX_REQUEST_BYTES}"
+            )
+            reply = encode_reply(ErrorReply.from_exception(error))
+        else:
+            reply = self.service.handle(payload.to_bytes() if payload is not None else b"")
+        try:
+            query.reply(self.key, reply)
+        except zenoh.ZError as exc:  # the querier gave up (timeout) or went away
+            log.debug("reply not delivered: %s", exc)

@@ -1,0 +1,1 @@
+"""Simulation core: field constants, PyBullet world, chassis model, referee, spawns."""

@@ -1,0 +1,128 @@
+"""The referee: HP and bullet accounting, kills, the end of the episode and the rewards.
+
+Rewards are the same for every robot of a team and zero-sum between the teams: each robot
+gets 0.01 per HP of net team damage (dealt minus taken), 3 per kill and 20 for a win, minus
+the same for losses (the paper's r_h, r_k, r_w). Sparse rewards keep only the win/loss term,
+as ±1. All amounts are kept per team so a wrapper can build its own reward from ``info``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from neuronsmae.server.sim import field as F
+from neuronsmae.server.sim.shots import fire
+
+R_DAMAGE = 0.01
+R_KILL = 3.0
+R_WIN = 20.0
+R_SPARSE = 1.0
+BLUE, RED = 0, 1
+TEAM_NAMES = ("blue", "red")
+_NO_DRAWS = np.zeros(0)
+
+
+@dataclass
+class StepTally:
+    """What happened to each team during one decision, for rewards and info."""
+
+    damage: np.ndarray
+    """(2,) HP dealt by each team."""
+    kills: np.ndarray
+    """(2,) robots each team destroyed."""
+
+    @classmethod
+    def zero(cls) -> StepTally:
+        return cls(np.zeros(2), np.zeros(2))
+
+
+class Referee:
+    """Keeps HP, bullets and the score for ``n_blue + n_red`` robots (blue first)."""
+
+    def __init__(self, n_blue: int, n_red: int, rng: np.random.Generator, sampled: bool) -> None:
+        self.n = n_blue + n_red
+        self.n_blue = n_blue
+        self.team = np.array([BLUE] * n_blue + [RED] * n_red, dtype=np.int64)
+        self.rng = rng
+        self.sampled = sampled
+        self.static_boxes = F.obstacle_array(tall_only=True)
+        self._robot_boxes = np.zeros((self.n, 6))
+        self._dist = np.zeros(self.n)
+        self.reset(np.full(self.n, float(F.START_HP)), coef=1.0)
+
+    def reset(self, max_hp: np.ndarray, coef: float) -> None:
+        """Full HP and bullets; ``coef`` scales the damage red deals."""
+        self.max_hp = max_hp.astype(np.float64)
+        self.hp = self.max_hp.copy()
+        self.bullets = np.full(self.n, float(F.START_BULLETS))
+        self.alive = np.ones(self.n, dtype=bool)
+        self.damage_dealt = np.zeros(self.n)
+        self.damage_taken = np.zeros(self.n)
+        self.kills = np.zeros(self.n, dtype=np.int64)
+        self.coef = coef
+        self.scale = np.where(self.team == RED, coef, 1.0)
+        self.winner: str | None = None
+        self._both_alive = True
+        self.last_plate = np.full(self.n, -1, dtype=np.int64)
+
+    def physics_step(self, poses: np.ndarray, targets: np.ndarray, tally: StepTally) -> int:
+        """Every live robot with bullets and a valid target fires once; apply the damage.
+
+        Returns how many robots were destroyed in this step.
+        """
+        draws = self.rng.random(self.n) if self.sampled else _NO_DRAWS
+        destroyed = fire(poses, self.alive, self.bullets, self.hp, targets, self.team, self.scale,
+                    self.static_boxes, self._robot_boxes, F.ARMOR_TABLE, draws,
+                    self.last_plate, self._dist, self.damage_dealt, self.damage_taken,
+                    self.kills, tally.damage, tally.kills)
+        if destroyed:
+            self._both_alive = bool(
+                self.alive[: self.n_blue].any() and self.alive[self.n_blue :].any()
+            )
+        return destroyed
+
+    def check_end(self, t: int, limit: int) -> bool:
+        """Decide the winner on annihilation or at the time limit; return whether it ended."""
+        if t < limit and self._both_alive:
+            return False
+        blue_alive = self.alive[: self.n_blue].any()
+        red_alive = self.alive[self.n_blue :].any()
+        if blue_alive and red_alive and t < limit:
+            return False
+        if blue_alive != red_alive:
+            self.winner = "blue" if blue_alive else "red"
+        else:
+            blue_hp = self.hp[self.team == BLUE].sum()
+            red_hp = self.hp[self.team == RED].sum()
+            self.winner = "draw" if np.isclose(blue_hp, red_hp) else (
+                "blue" if blue_hp > red_hp else "red")
+        return True
+
+    def team_rewards(self, tally: StepTally, dense: bool) -> tuple[np.ndarray, dict[str, float]]:
+        """(2,) reward per robot of each team for a decision, and blue's reward components."""
+        win = 0.0
+        if self.winner in TEAM_NAMES:
+            win = 1.0 if self.winner == "blue" else -1.0
+        if dense:
+            parts = {
+                "damage": R_DAMAGE * float(tally.damage[BLUE] - tally.damage[RED]),
+                "kill": R_KILL * float(tally.kills[BLUE] - tally.kills[RED]),
+                "win": R_WIN * win,
+            }
+        else:
+            parts = {"damage": 0.0, "kill": 0.0, "win": R_SPARSE * win}
+        blue = sum(parts.values())
+        return np.array([blue, -blue]), parts
+
+    def info(self) -> dict[str, object]:
+        """Per-robot tallies (blue first) and the winner, as plain Python values."""
+        return {
+            "hp": self.hp.tolist(),
+            "bullets": self.bullets.astype(int).tolist(),
+            "damage_dealt": self.damage_dealt.tolist(),
+            "damage_taken": self.damage_taken.tolist(),
+            "kills": self.kills.tolist(),
+            "alive": self.alive.tolist(),
+            "winner": self.winner,
+        }

@@ -1,0 +1,193 @@
+"""Shot selection as a numba kernel: which armour plate, if any, each robot hits this step.
+
+The referee calls :func:`select_shots` once per physics step for all robots, so it is one
+compiled function over arrays rather than Python per robot per plate. Occlusion is a ray
+test in 3-D against the field's boxes: the ray runs from the muzzle (0.374 m high) down to
+the plate (0.195 m), so tall obstacles and robots block it while the low ones (≤ 0.145 m)
+cannot, exactly as heights dictate; anything within 8 cm of the plate is ignored (the
+target's own body around its plate).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+from neuronsmae.server.sim import field as F
+
+MIN_RANGE = 0.3
+MAX_RANGE = 9.0
+BEARING_LIMIT = 0.52
+MIN_INCIDENCE = math.radians(35.0)
+OCCLUSION_MARGIN = 0.08
+BANDS = np.array([3.0, 6.0], dtype=np.float64)
+FACTORS = np.array([1.0, 0.5, 0.2], dtype=np.float64)
+
+
+@nb.njit(cache=True)
+def hit_factor(d: float) -> float:
+    """Expected hit fraction by distance: 1.0 below 3 m, 0.5 to 6 m, 0.2 beyond."""
+    if d < 3.0:
+        return 1.0
+    if d < 6.0:
+        return 0.5
+    return 0.2
+
+
+@nb.njit(cache=True)
+def segment_box_blocked(ax, ay, az, bx, by, bz, box) -> bool:
+    """Does the 3-D segment A→B pass through the vertical box (cx, cy, hx, hy, yaw, h)?"""
+    c, s = math.cos(box[4]), math.sin(box[4])
+    # Into the box frame.
+    px, py = ax - box[0], ay - box[1]
+    lx0, ly0 = c * px + s * py, -s * px + c * py
+    qx, qy = bx - box[0], by - box[1]
+    lx1, ly1 = c * qx + s * qy, -s * qx + c * qy
+    t0, t1 = 0.0, 1.0
+    for d0, d1, half in ((lx0, lx1, box[2]), (ly0, ly1, box[3])):
+        dd = d1 - d0
+        if abs(dd) < 1e-12:
+            if abs(d0) > half:
+                return False
+            continue
+        ta, tb = (-half - d0) / dd, (half - d0) / dd
+        if ta > tb:
+            ta, tb = tb, ta
+        t0, t1 = max(t0, ta), min(t1, tb)
+        if t0 > t1:
+            return False
+    z_low = min(az + (bz - az) * t0, az + (bz - az) * t1)
+    return z_low < box[5]
+
+
+@nb.njit(cache=True)
+def select_shots(poses, alive, bullets, targets, static_boxes, robot_boxes, plates, out_plate,
+                 out_dist):
+    """For each robot, the plate of its target it hits this step (-1 for none).
+
+    poses (N, 3); alive (N,) bool; bullets (N,) float; targets (N,) int robot index or -1;
+    static_boxes (S, 6) and robot_boxes (N, 6) as (cx, cy, hx, hy, yaw, height);
+    plates (4, 4) along, across, normal angle, multiplier. Writes out_plate (N,) int and
+    out_dist (N,) float (muzzle-to-plate distance of the chosen plate).
+    """
+    n = poses.shape[0]
+    cos_inc = math.cos(math.pi / 2 - MIN_INCIDENCE)
+    for s in range(n):
+        out_plate[s] = -1
+        out_dist[s] = 0.0
+        t = targets[s]
+        if not alive[s] or bullets[s] <= 0 or t < 0 or t == s or not alive[t]:
+            continue
+        sx, sy, syaw = poses[s, 0], poses[s, 1], poses[s, 2]
+        tx, ty, tyaw = poses[t, 0], poses[t, 1], poses[t, 2]
+        # The gimbal turns toward the target (within ±90° of the chassis); the muzzle sits
+        # 0.18 m ahead of its axis.
+        aim = math.atan2(ty - sy, tx - sx) - syaw
+        aim = math.atan2(math.sin(aim), math.cos(aim))
+        aim = min(max(aim, -F.GIMBAL_YAW_LIMIT), F.GIMBAL_YAW_LIMIT) + syaw
+        mx = sx + F.SHOOTER_OFFSET * math.cos(aim)
+        my = sy + F.SHOOTER_OFFSET * math.sin(aim)
+        ct, st = math.cos(tyaw), math.sin(tyaw)
+        best = 1e9
+        for p in range(4):
+            px = tx + ct * plates[p, 0] - st * plates[p, 1]
+            py = ty + st * plates[p, 0] + ct * plates[p, 1]
+            dx, dy = px - mx, py - my
+            d = math.sqrt(dx * dx + dy * dy)
+            if d <= MIN_RANGE or d >= MAX_RANGE or d >= best:
+                continue
+            bearing = math.atan2(py - sy, px - sx) - syaw
+            bearing = math.atan2(math.sin(bearing), math.cos(bearing))
+            if abs(bearing) > BEARING_LIMIT:
+                continue
+            nang = tyaw + plates[p, 2]
+            # The shot must meet the plate surface at more than 35°: the angle between the
+            # reversed shot and the plate's outward normal must be below 55°.
+            if -(dx * math.cos(nang) + dy * math.sin(nang)) / d <= cos_inc:
+                continue
+            # Stop the ray 8 cm short of the plate; the 3-D segment descends to the plate.
+            f = (d - OCCLUSION_MARGIN) / d
+            ex, ey = mx + dx * f, my + dy * f
+            ez = F.SHOOTER_HEIGHT + (F.ARMOR_HEIGHT - F.SHOOTER_HEIGHT) * f
+            blocked = False
+            for b in range(static_boxes.shape[0]):
+                if segment_box_blocked(mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, static_boxes[b]):
+                    blocked = True
+                    break
+            if not blocked:
+                for r in range(n):
+                    if r != s and r != t and segment_box_blocked(
+                        mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, robot_boxes[r]
+                    ):
+                        blocked = True
+                        break
+            if not blocked:
+                best = d
+                out_plate[s] = p
+                out_dist[s] = d
+
+
+@nb.njit(cache=True)
+def fill_robot_boxes(poses, out):
+    """Robot footprints as boxes (cx, cy, hx, hy, yaw, height) for ray tests."""
+    for i in range(poses.shape[0]):
+        out[i, 0] = poses[i, 0]
+        out[i, 1] = poses[i, 1]
+        out[i, 2] = F.ROBOT_LENGTH / 2
+        out[i, 3] = F.ROBOT_WIDTH / 2
+        out[i, 4] = poses[i, 2]
+        out[i, 5] = F.ROBOT_HEIGHT
+
+
+@nb.njit(cache=True)
+def fire(poses, alive, bullets, hp, targets, team, scale, static_boxes, robot_boxes, plates,
+         draws, plate_out, dist_out, dealt_total, taken_total, kills, tally_damage,
+         tally_kills) -> int:
+    """One physics step of shooting: select shots, spend bullets, apply damage, count kills.
+
+    Shots are simultaneous: all are chosen from the same poses before any damage lands.
+    ``draws`` (N,) holds uniform numbers for sampled hits, or is empty for expected damage.
+    A victim's actual HP loss is shared among its shooters in proportion to what each fired;
+    the kill goes to the shooter that dealt the most (lowest index on ties). Returns the
+    number of robots destroyed this step.
+    """
+    n = poses.shape[0]
+    fill_robot_boxes(poses, robot_boxes)
+    select_shots(poses, alive, bullets, targets, static_boxes, robot_boxes, plates, plate_out,
+                 dist_out)
+    raw = np.zeros(n)
+    incoming = np.zeros(n)
+    for s in range(n):
+        p = plate_out[s]
+        if p < 0:
+            continue
+        bullets[s] -= 1.0
+        f = hit_factor(dist_out[s])
+        if draws.shape[0] > 0:
+            f = 1.0 if draws[s] < f else 0.0
+        raw[s] = f * plates[p, 3] * scale[s]
+        incoming[targets[s]] += raw[s]
+    destroyed = 0
+    for v in range(n):
+        if incoming[v] <= 0.0:
+            continue
+        lost = min(incoming[v], hp[v])
+        share = lost / incoming[v]
+        hp[v] -= lost
+        taken_total[v] += lost
+        killer, best = -1, -1.0
+        for s in range(n):
+            if plate_out[s] >= 0 and targets[s] == v:
+                d = raw[s] * share
+                dealt_total[s] += d
+                tally_damage[team[s]] += d
+                if d > best:
+                    killer, best = s, d
+        if hp[v] <= 1e-9 and alive[v]:
+            hp[v] = 0.0
+            alive[v] = False
+            kills[killer] += 1
+            tally_kills[team[killer]] += 1
+            destroyed += 1
+    return destroyed

@@ -1,0 +1,149 @@
+"""The PyBullet side of the arena: static field, robot bodies, stepping and pose readout.
+
+Each :class:`World` owns its own PyBullet client in DIRECT mode and passes the client id on
+every call, so any number of arenas can live in one process without interfering. Robots are
+planar: there is no gravity and no floor, each physics step sets every live robot's velocity
+from the chassis model (z, roll and pitch rates zero) and PyBullet resolves the collisions
+with walls, obstacles and other robots; any out-of-plane drift is projected away.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as pb
+from neuronsmae.server.sim import field as F
+
+ROBOT_Z = F.ROBOT_HEIGHT / 2.0
+_ZERO = (0.0, 0.0, 0.0)
+
+
+class World:
+    """A PyBullet world holding the RMUA field and ``n_robots`` robot bodies."""
+
+    def __init__(self, n_robots: int, physics_dt: float = F.PHYSICS_DT) -> None:
+        self.n_robots = n_robots
+        self.physics_dt = physics_dt
+        self.client = pb.connect(pb.DIRECT)
+        self.bodies: list[int] = []
+        self.static_bodies: list[int] = []
+        self._robot_shape = -1
+
+    # --- building -----------------------------------------------------------------------
+    def build(self, poses: np.ndarray) -> None:
+        """(Re)build the field and place robots at ``poses`` (N, 3) x, y, yaw.
+
+        The whole simulation is reset so that an episode never inherits contact caches or
+        solver warm-starts from the previous one: episode n of a long-lived arena is
+        bit-identical to episode n of a fresh one given the same seed.
+        """
+        cid = self.client
+        pb.resetSimulation(physicsClientId=cid)
+        pb.setGravity(0, 0, 0, physicsClientId=cid)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.physics_dt, numSubSteps=1, numSolverIterations=10,
+            deterministicOverlappingPairs=1,
+            physicsClientId=cid,
+        )
+        self.static_bodies = [self._box(*b) for b in _static_boxes()]
+        self._robot_shape = pb.createCollisionShape(
+            pb.GEOM_BOX,
+            halfExtents=[F.ROBOT_LENGTH / 2, F.ROBOT_WIDTH / 2, F.ROBOT_HEIGHT / 2],
+            physicsClientId=cid,
+        )
+        self.bodies = []
+        for x, y, yaw in poses:
+            body = pb.createMultiBody(
+                baseMass=F.ROBOT_MASS,
+                baseCollisionShapeIndex=self._robot_shape,
+                basePosition=[x, y, ROBOT_Z],
+                baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), useMaximalCoordinates=True,
+                physicsClientId=cid,
+            )
+            pb.changeDynamics(
+                body, -1, lateralFriction=0.0, restitution=0.0, linearDamping=0.0,
+                angularDamping=0.0, physicsClientId=cid,
+            )
+            self.bodies.append(body)
+
+    def _box(self, cx: float, cy: float, hx: float, hy: float, yaw: float, h: float) -> int:
+        cid = self.client
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[hx, hy, h / 2],
+                                        physicsClientId=cid)
+        body = pb.createMultiBody(
+            baseMass=0, baseCollisionShapeIndex=shape, basePosition=[cx, cy, h / 2],
+            baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), useMaximalCoordinates=True,
+            physicsClientId=cid,
+        )
+        pb.changeDynamics(body, -1, lateralFriction=0.0, restitution=0.0, physicsClientId=cid)
+        return body
+
+    # --- stepping -----------------------------------------------------------------------
+    def step(self, poses: np.ndarray, body_vel: np.ndarray, alive: np.ndarray) -> None:
+        """Drive each robot at its body-frame velocity for one physics step, then read poses.
+
+        ``poses`` (N, 3) is updated in place with the poses after the step. ``body_vel`` is
+        (N, 3) forward, left, ω (CCW). Destroyed robots are held still: they stay in place
+        as obstacles. This runs 50 times per simulated second per arena, so it works on
+        Python lists and local names rather than numpy scalars.
+        """
+        cid = self.client
+        reset_vel, get_pose = pb.resetBaseVelocity, pb.getBasePositionAndOrientation
+        cos, sin, atan2 = math.cos, math.sin, math.atan2
+        old = poses.tolist()
+        live = alive.tolist()
+        for body, (_, _, yaw), (vf, vl, w), a in zip(
+            self.bodies, old, body_vel.tolist(), live, strict=True
+        ):
+            if a:
+                c, s = cos(yaw), sin(yaw)
+                reset_vel(body, (c * vf - s * vl, s * vf + c * vl, 0.0), (0.0, 0.0, w),
+                          physicsClientId=cid)
+            else:
+                reset_vel(body, _ZERO, _ZERO, physicsClientId=cid)
+        pb.stepSimulation(physicsClientId=cid)
+        new = []
+        for body, prev, a in zip(self.bodies, old, live, strict=True):
+            pos, q = get_pose(body, physicsClientId=cid)
+            if not a:
+                # Hold destroyed robots exactly where they died, even if something pushed them.
+                if pos[0] != prev[0] or pos[1] != prev[1]:
+                    self._place(body, (prev[0], prev[1], ROBOT_Z), prev[2])
+                new.append(prev)
+                continue
+            yaw = atan2(2.0 * (q[3] * q[2] + q[0] * q[1]), 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]))
+            if abs(pos[2] - ROBOT_Z) > 1e-3 or abs(q[0]) > 1e-3 or abs(q[1]) > 1e-3:
+                self._place(body, (pos[0], pos[1], ROBOT_Z), yaw)
+            new.append((pos[0], pos[1], yaw))
+        poses[:] = new
+
+    def _place(self, body: int, pos: tuple[float, float, float], yaw: float) -> None:
+        q = (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
+        pb.resetBasePositionAndOrientation(body, pos, q, physicsClientId=self.client)
+
+    def place(self, i: int, x: float, y: float, yaw: float) -> None:
+        """Teleport robot ``i`` (used by tests to build scenes)."""
+        self._place(self.bodies[i], (x, y, ROBOT_Z), yaw)
+
+    def close(self) -> None:
+        """Disconnect the PyBullet client; safe to call twice."""
+        if self.client >= 0:
+            try:
+                pb.disconnect(physicsClientId=self.client)
+            except pb.error:
+                pass  # already disconnected (e.g. interpreter shutdown)
+            self.client = -1
+
+
+def _static_boxes() -> list[tuple[float, float, float, float, float, float]]:
+    """Walls (outside the interior) and obstacles as (cx, cy, hx, hy, yaw, height)."""
+    t, h = F.WALL_THICKNESS, F.WALL_HEIGHT
+    X, Y = F.FIELD_X, F.FIELD_Y
+    walls = [
+        (X / 2, -t / 2, X / 2 + t, t / 2, 0.0, h),
+        (X / 2, Y + t / 2, X / 2 + t, t / 2, 0.0, h),
+        (-t / 2, Y / 2, t / 2, Y / 2 + t, 0.0, h),
+        (X + t / 2, Y / 2, t / 2, Y / 2 + t, 0.0, h),
+    ]
+    return walls + [tuple(row) for row in F.obstacle_array()]  # type: ignore[misc]

@@ -1,0 +1,179 @@
+"""Action spaces: validation, decoding into robot intents, and availability masks.
+
+An *intent* is what one robot does for a decision: the enemy it aims at and how it moves —
+toward a goal point through the planner (abstract), at a fixed body velocity with the
+chassis turning toward the target (discrete), or at a commanded (vx, vy, ω) (continuous).
+Bots produce intents of the abstract kind, so every robot is driven by the same code.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from neuronsmae.protocol.errors import InvalidActionError
+
+V_MAX = 2.0
+W_MAX = 1.75
+DISCRETE_SPEED = 1.0
+DISCRETE_MOVES = ("stop", "forward", "back", "left", "right")
+DISCRETE_VEL = np.array(
+    [
+        (0.0, 0.0),
+        (DISCRETE_SPEED, 0.0),
+        (-DISCRETE_SPEED, 0.0),
+        (0.0, DISCRETE_SPEED),
+        (0.0, -DISCRETE_SPEED),
+    ]
+)
+"""Body-frame (forward, left) velocity of each discrete move."""
+
+KIND_GOAL, KIND_BODY, KIND_CMD = 0, 1, 2
+
+
+@dataclass
+class Intent:
+    """One robot's decision: target enemy (robot index) and motion."""
+
+    target: int
+    kind: int
+    goal: np.ndarray | None = None
+    """World (x, y) goal for KIND_GOAL."""
+    vel: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Body (forward, left, ω) for KIND_CMD; (forward, left, -) for KIND_BODY."""
+
+
+def n_actions(space: str, n_enemy: int, k: int) -> int:
+    """Size of the flat discrete action set (the target choices for continuous)."""
+    return {
+        "abstract": n_enemy * k,
+        "discrete": n_enemy * len(DISCRETE_MOVES),
+        "continuous": n_enemy,
+    }[space]
+
+
+def _as_index(agent: int, action: Any, size: int) -> int:
+    if isinstance(action, np.ndarray) and action.shape == ():
+        action = action.item()
+    if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
+        if isinstance(action, (float, np.floating)) and float(action).is_integer():
+            action = int(action)
+        else:
+            raise InvalidActionError(
+                f"agent {agent}: action must be an integer in [0, {size - 1}], got {action!r}"
+            )
+    if not 0 <= int(action) < size:
+        raise InvalidActionError(
+            f"agent {agent}: action {int(action)} is out of range; valid: [0, {size - 1}]"
+        )
+    return int(action)
+
+
+def _as_continuous(agent: int, action: Any, n_enemy: int, clip: bool) -> tuple[float, ...]:
+    try:
+        arr = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidActionError(
+            f"agent {agent}: continuous action must be 4 numbers (vx, vy, omega, target), "
+            f"got {action!r}"
+        ) from None
+    if arr.shape != (4,):
+        raise InvalidActionError(
+            f"agent {agent}: continuous action must have shape (4,) (vx, vy, omega, target), "
+            f"got shape {arr.shape}"
+        )
+    if not np.isfinite(arr).all():
+        raise InvalidActionError(f"agent {agent}: action has NaN or infinite values: {arr}")
+    bounds = ((-V_MAX, V_MAX), (-V_MAX, V_MAX), (-W_MAX, W_MAX))
+    vals = []
+    for name, v, (lo, hi) in zip(("vx", "vy", "omega"), arr[:3], bounds, strict=True):
+        if not lo <= v <= hi:
+            if not clip:
+                raise InvalidActionError(
+                    f"agent {agent}: {name}={v} is outside [{lo}, {hi}] "
+                    "(or build the arena with clip_actions=True)"
+                )
+            v = min(max(v, lo), hi)
+        vals.append(float(v))
+    target = arr[3]
+    if clip:
+        target = min(max(round(target), 0), n_enemy - 1)
+    if not float(target).is_integer() or not 0 <= target < n_enemy:
+        raise InvalidActionError(
+            f"agent {agent}: target={arr[3]} must be an integer in [0, {n_enemy - 1}]"
+        )
+    return (*vals, int(target))
+
+
+class ActionDecoder:
+    """Checks a joint action and turns it into intents for the controlled robots."""
+
+    def __init__(self, space: str, n_enemy: int, k: int, clip: bool) -> None:
+        self.space = space
+        self.n_enemy = n_enemy
+        self.k = k
+        self.clip = clip
+        self.size = n_actions(space, n_enemy, k)
+
+    def validate(self, actions: Sequence[Any], n_agents: int) -> list[Any]:
+        """Raise InvalidActionError for a wrong count, type, index, NaN or bound."""
+        if isinstance(actions, (str, bytes, dict)) or not hasattr(actions, "__len__"):
+            raise InvalidActionError(
+                f"actions must be a sequence of {n_agents} per-agent actions, got {actions!r}"
+            )
+        if len(actions) != n_agents:
+            raise InvalidActionError(
+                f"expected {n_agents} actions (one per agent), got {len(actions)}"
+            )
+        if self.space == "continuous":
+            return [_as_continuous(i, a, self.n_enemy, self.clip) for i, a in enumerate(actions)]
+        return [_as_index(i, a, self.size) for i, a in enumerate(actions)]
+
+    def decode(self, action: Any, enemies: np.ndarray, cands: np.ndarray) -> Intent:
+        """One validated action → intent. ``enemies`` are the robot indices of the enemies in
+        observation order; ``cands`` (n_enemy, k, 2) the candidate points in the observation."""
+        if self.space == "continuous":
+            vx, vy, w, t = action
+            return Intent(int(enemies[t]), KIND_CMD, vel=(vx, vy, w))
+        if self.space == "abstract":
+            e, c = divmod(action, self.k)
+            return Intent(int(enemies[e]), KIND_GOAL, goal=cands[e, c])
+        e, m = divmod(action, len(DISCRETE_MOVES))
+        vf, vl = DISCRETE_VEL[m]
+        return Intent(int(enemies[e]), KIND_BODY, vel=(vf, vl, 0.0))
+
+    def mask(self, alive_self: bool, enemy_alive: np.ndarray, cand_valid: np.ndarray) -> np.ndarray:
+        """int8 mask over the flat actions: dead robots only no-op; dead enemies are not
+        targets; an enemy without candidate points offers only its first ("stay") point.
+
+        ``enemy_alive`` is (n_enemy,) bool, ``cand_valid`` (n_enemy, k) bool."""
+        m = np.zeros(self.size, dtype=np.int8)
+        if not alive_self or not enemy_alive.any():
+            m[0] = 1
+            return m
+        if self.space == "continuous":
+            m[:] = enemy_alive
+        elif self.space == "discrete":
+            m[:] = np.repeat(enemy_alive, len(DISCRETE_MOVES))
+        else:
+            # Candidate rows are all real or, for the "stay" sentinel, all not: then only the
+            # first (stay) point of that enemy is offered.
+            block = np.where(cand_valid.any(axis=1)[:, None], True, _first_only(self.k))
+            m[:] = (block & enemy_alive[:, None]).reshape(-1)
+        return m
+
+
+def _first_only(k: int) -> np.ndarray:
+    out = np.zeros(k, dtype=bool)
+    out[0] = True
+    return out
+
+
+def heading_rate(yaw: float, x: float, y: float, tx: float, ty: float, limit: float = 2.0) -> float:
+    """Auto-turn: ω equals the heading error toward the target, clamped to ±limit rad/s."""
+    err = math.atan2(ty - y, tx - x) - yaw
+    err = math.atan2(math.sin(err), math.cos(err))
+    return min(max(err, -limit), limit)

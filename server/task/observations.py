@@ -1,0 +1,122 @@
+"""Observation vectors, the global state and their layouts.
+
+Vector layout for a robot with ``a`` team-mates (itself first) and ``e`` enemies, every value
+in [-1, 1] (``docs/options.md`` has the table):
+
+    [poses 3·(a+e)] [candidate points 2·k·e, optional] [time 1] [HP a+e] [bullets a+e]
+    [LiDAR 61, optional]
+
+Poses are (x, y, yaw) of self, allies in index order, then enemies in index order. For 2 v 2
+with abstract actions and k = 4 this is the released 37-value layout; without candidate
+points it is the released 21-value one. Under partial observability an enemy outside the
+camera's view or sight has its pose and candidate points replaced by ``unseen_value``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from neuronsmae.server.sim import field as F
+
+LIDAR_OFFSET = 61
+HALF_X, HALF_Y = F.FIELD_X / 2.0, F.FIELD_Y / 2.0
+
+
+def obs_size(n_team: int, n_enemy: int, k: int, candidates: bool, vector: bool, lidar: bool) -> int:
+    """Length of one observation: the formula of the module docstring."""
+    n = n_team + n_enemy
+    size = (3 * n + (2 * k * n_enemy if candidates else 0) + 1 + 2 * n) if vector else 0
+    return size + (F.LIDAR_BEAMS if lidar else 0)
+
+
+def state_size(n_robots: int) -> int:
+    """Global state: pose, HP and bullets of every robot, then the time."""
+    return 5 * n_robots + 1
+
+
+def norm_xy(xy: np.ndarray) -> np.ndarray:
+    """Positions to [-1, 1] along each axis of the field."""
+    out = np.empty_like(xy, dtype=np.float64)
+    out[..., 0] = (xy[..., 0] - HALF_X) / HALF_X
+    out[..., 1] = (xy[..., 1] - HALF_Y) / HALF_Y
+    return out
+
+
+def norm_yaw(yaw: np.ndarray) -> np.ndarray:
+    """Yaw wrapped to [-π, π) and divided by π."""
+    return (np.mod(yaw + np.pi, 2 * np.pi) - np.pi) / np.pi
+
+
+def norm_pose(poses: np.ndarray) -> np.ndarray:
+    """(N, 3) poses → normalised (N, 3)."""
+    out = np.empty_like(poses)
+    out[:, :2] = norm_xy(poses[:, :2])
+    out[:, 2] = norm_yaw(poses[:, 2])
+    return out
+
+
+def norm_time(t: int, limit: int) -> float:
+    """Elapsed physics steps → [-1, 1]."""
+    return 2.0 * t / limit - 1.0
+
+
+def norm_hp(hp: np.ndarray, max_hp: np.ndarray) -> np.ndarray:
+    """HP over the robot's own starting HP (600 by default), to [-1, 1]."""
+    return 2.0 * hp / max_hp - 1.0
+
+
+def norm_bullets(bullets: np.ndarray) -> np.ndarray:
+    """Bullets over the 370 at the start, to [-1, 1]."""
+    return 2.0 * bullets / F.START_BULLETS - 1.0
+
+
+def vector_obs(
+    order: np.ndarray,
+    n_team: int,
+    poses_n: np.ndarray,
+    cands_n: np.ndarray | None,
+    t_n: float,
+    hp_n: np.ndarray,
+    bul_n: np.ndarray,
+    seen: np.ndarray,
+    unseen: float,
+) -> np.ndarray:
+    """One robot's vector.
+
+    ``order`` lists robot indices as self, allies, enemies; ``poses_n``, ``hp_n``, ``bul_n``
+    are normalised per robot; ``cands_n`` (n_enemy, k, 2) normalised or None; ``seen``
+    (n_enemy,) bool says which enemies this robot currently sees.
+    """
+    poses = poses_n[order].copy()
+    poses[n_team:][~seen] = unseen
+    parts = [poses.reshape(-1)]
+    if cands_n is not None:
+        cands = cands_n.copy()
+        cands[~seen] = unseen
+        parts.append(cands.reshape(-1))
+    parts += [np.array([t_n]), hp_n[order], bul_n[order]]
+    return np.concatenate(parts)
+
+
+def global_state(
+    poses_n: np.ndarray, hp_n: np.ndarray, bul_n: np.ndarray, t_n: float
+) -> np.ndarray:
+    """The true state from the blue-first view: per robot (x, y, yaw, HP, bullets), time."""
+    per_robot = np.concatenate([poses_n, hp_n[:, None], bul_n[:, None]], axis=1)
+    return np.concatenate([per_robot.reshape(-1), [t_n]]).astype(np.float32)
+
+
+def camera_sees(
+    pose: np.ndarray, target_xy: np.ndarray, other_xy: np.ndarray, hfov: float, blocked: bool
+) -> bool:
+    """Is ``other_xy`` inside the camera's horizontal view? The gimbal points at the robot's
+    current target within ±90° of the chassis; ``blocked`` is the line-of-sight verdict."""
+    if blocked:
+        return False
+    aim = math.atan2(target_xy[1] - pose[1], target_xy[0] - pose[0]) - pose[2]
+    aim = math.atan2(math.sin(aim), math.cos(aim))
+    aim = min(max(aim, -F.GIMBAL_YAW_LIMIT), F.GIMBAL_YAW_LIMIT) + pose[2]
+    bearing = math.atan2(other_xy[1] - pose[1], other_xy[0] - pose[0]) - aim
+    bearing = math.atan2(math.sin(bearing), math.cos(bearing))
+    return abs(bearing) <= hfov / 2.0

@@ -1,0 +1,120 @@
+"""Real servers on loopback ports, started as subprocesses, shared per test module."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+import zenoh
+from neuronsmae.client import ping
+from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
+from neuronsmae.protocol.transport import client_config
+
+STARTUP_TIMEOUT = 120.0
+
+
+def free_port() -> int:
+    """A TCP port nothing listens on right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """A ``python -m neuronsmae.server`` subprocess on one port."""
+
+    def __init__(self, port: int, *args: str) -> None:
+        self.port = port
+        cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(port), *args]
+        # A file, not a pipe, so a chatty server never blocks; closed in stop().
+        self.log = tempfile.TemporaryFile()  # noqa: SIM115
+        self.proc = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self.log
+        )
+
+    def stderr(self) -> str:
+        self.log.seek(0)
+        return self.log.read().decode(errors="replace")
+
+    def wait_ready(self, timeout: float = STARTUP_TIMEOUT) -> Server:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited: {self.stderr()}")
+            try:
+                ping(self.port, timeout=1.0)
+                return self
+            except ServerUnavailableError:
+                time.sleep(0.1)
+        raise RuntimeError(f"server on port {self.port} did not start")
+
+    def stop(self, sig: int = signal.SIGTERM) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGCONT)  # in case a test left it stopped
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture(scope="module")
+def start_server() -> Iterator[Callable[..., Server]]:
+    """Start servers (ready when returned); all of them stop when the module ends."""
+    started: list[Server] = []
+
+    def start(*args: str, port: int | None = None) -> Server:
+        server = Server(port or free_port(), "--time-scale", "0", *args)
+        started.append(server)
+        return server.wait_ready()
+
+    yield start
+    for server in started:
+        server.stop()
+
+
+class RawClient:
+    """Sends arbitrary bytes to a server's queryable, as a hostile client would."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.session = zenoh.open(client_config("127.0.0.1", port))
+
+    def send(self, payload: bytes, key: str | None = None, timeout: float = 5.0) -> Reply | None:
+        for reply in self.session.get(key or rpc_key(self.port), payload=payload, timeout=timeout):
+            assert reply.ok is not None
+            return decode_reply(reply.ok.payload.to_bytes())
+        return None
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def same(a: Any, b: Any) -> bool:
+    """Bit-for-bit equality of nested results (dtype, shape, bytes; -0.0 ≠ 0.0)."""
+    if isinstance(a, (np.ndarray, np.generic)):
+        return (
+            type(a) is type(b)
+            and a.dtype == b.dtype
+            and a.shape == b.shape
+            and a.tobytes() == b.tobytes()
+        )
+    if isinstance(a, (list, tuple)):
+        return isinstance(b, (list, tuple)) and len(a) == len(b) and all(map(same, a, b))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, float):
+        return type(b) is float and np.float64(a).tobytes() == np.float64(b).tobytes()
+    return type(a) is type(b) and a == b

@@ -1,0 +1,325 @@
+"""RM against real servers on loopback ports: parity, isolation, hostile input, failures."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from neuronsmae.client import RM, context_table, ping
+from neuronsmae.protocol.errors import (
+    ERRORS,
+    BusyError,
+    InvalidActionError,
+    InvalidContextError,
+    InvalidOptionError,
+    ResetNeededError,
+    ServerUnavailableError,
+)
+from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.messages import (
+    MESSAGES,
+    NOT_CONFIGURED,
+    PROTOCOL_VERSION,
+    Close,
+    Configure,
+    ErrorReply,
+    OkReply,
+    Ping,
+    Step,
+    encode_request,
+    rpc_key,
+)
+from neuronsmae.server.arena import Arena
+from neuronsmae.server.contexts import context_table as local_context_table
+
+from .conftest import RawClient, Server, free_port, same
+
+CONTINUOUS = {"action_space": "continuous", "mode": "competitive"}
+
+
+@pytest.fixture(scope="module")
+def server_a(start_server: Callable[..., Server]) -> Server:
+    return start_server()
+
+
+@pytest.fixture(scope="module")
+def server_b(start_server: Callable[..., Server]) -> Server:
+    return start_server("--seed", "99")
+
+
+@pytest.fixture(scope="module")
+def raw_b(server_b: Server) -> Iterator[RawClient]:
+    raw = RawClient(server_b.port)
+    yield raw
+    raw.close()
+
+
+def policy(env: ArenaAPI, rng: np.random.Generator) -> list[Any]:
+    """Random valid actions from the availability masks (continuous: random velocities)."""
+    continuous = env.get_env_info()["action_space"] == "continuous"
+    actions: list[Any] = []
+    for mask in env.get_avail_actions():
+        choice = int(rng.choice(np.flatnonzero(mask)))
+        if continuous:
+            actions.append([*rng.uniform(-1.5, 1.5, size=3).tolist(), choice])
+        else:
+            actions.append(choice)
+    return actions
+
+
+def play_in_lockstep(remote: ArenaAPI, local: ArenaAPI, decisions: int, seed: int = 0) -> None:
+    """Drive both arenas with the same actions; every result must match bit for bit."""
+    rng = np.random.default_rng(seed)
+    assert same(remote.get_env_info(), local.get_env_info())
+    contexts = {"Friction_coeff": 0.3, "VK1": 0.5, "coef": 0.8, "level": 1}
+    assert same(remote.reset(contexts), local.reset(contexts))
+    resets = iter([{"seed": 5}, {"contexts": {"level": "hard"}}, {}])
+    for _ in range(decisions):
+        actions = policy(local, rng)
+        result = remote.step(actions)
+        assert same(result, local.step(actions))
+        assert same(remote.get_state(), local.get_state())
+        assert same(remote.get_avail_actions(), local.get_avail_actions())
+        if result[2]:
+            kwargs = next(resets)
+            assert same(remote.reset(**kwargs), local.reset(**kwargs))
+    assert same(remote.get_obs(), local.get_obs())
+
+
+@pytest.mark.parametrize("options", [{}, CONTINUOUS], ids=["abstract-2v2", "continuous-2v2"])
+def test_remote_trajectory_equals_in_process(server_a: Server, options: dict[str, Any]) -> None:
+    with RM(seed=21, port=server_a.port, launch=False, timeout=10, **options) as remote:
+        local = Arena(seed=21, **options)
+        try:
+            play_in_lockstep(remote, local, decisions=60)
+            assert same(remote.render(), local.render())
+        finally:
+            local.close()
+
+
+def test_rm_keeps_the_interface_and_its_docstrings() -> None:
+    for name in ArenaAPI.__abstractmethods__:
+        assert getattr(RM, name).__doc__ == getattr(ArenaAPI, name).__doc__
+
+
+def test_two_servers_never_cross_talk(server_a: Server, server_b: Server) -> None:
+    assert ping(server_a.port)["server"] != ping(server_b.port)["server"]
+    with (
+        RM(seed=1, port=server_a.port, launch=False) as ra,
+        RM(seed=2, port=server_b.port, launch=False) as rb,
+    ):
+        la, lb = Arena(seed=1), Arena(seed=2)
+        rng = np.random.default_rng(3)
+        assert same(ra.reset(), la.reset()) and same(rb.reset(), lb.reset())
+        assert not same(ra.get_state(), rb.get_state())
+        for _ in range(5):
+            acts = policy(la, rng)
+            assert same(rb.step(acts), lb.step(acts))
+            assert same(ra.get_obs(), la.get_obs())  # b's steps never reach a
+            assert same(ra.step(acts), la.step(acts))
+    raw = RawClient(server_a.port)
+    try:  # a session connected to a cannot reach b's key
+        assert raw.send(encode_request(Ping()), key=rpc_key(server_b.port), timeout=1.0) is None
+    finally:
+        raw.close()
+
+
+def test_second_client_is_refused_until_the_owner_closes(server_a: Server) -> None:
+    with RM(seed=3, port=server_a.port, launch=False) as first:
+        with pytest.raises(BusyError, match="owned by another client"):
+            RM(seed=3, port=server_a.port, launch=False)
+        first.reset()
+    with RM(seed=3, port=server_a.port, launch=False) as second:
+        assert same(second.reset(), Arena(seed=3).reset())
+
+
+def test_typed_errors_reach_the_caller(server_a: Server) -> None:
+    with pytest.raises(InvalidOptionError, match="warp"):
+        RM(port=server_a.port, launch=False, warp=9)
+    with RM(seed=4, port=server_a.port, launch=False, timeout=5) as env:
+        with pytest.raises(ResetNeededError):
+            env.step([0, 0])
+        env.reset()
+        with pytest.raises(InvalidActionError):
+            env.step([99, 0])
+        with pytest.raises(InvalidActionError):
+            env.step([object(), 0])
+        with pytest.raises(InvalidContextError, match="gravity"):
+            env.reset({"gravity": 1.0})
+    assert context_table(server_a.port) == local_context_table()
+
+
+def _raw(**fields: Any) -> bytes:
+    wire = {"v": PROTOCOL_VERSION, "session": "hostile", **fields}
+    return msgpack.packb(wire, use_bin_type=True)
+
+
+MALFORMED = {
+    "random-bytes": (b"\x00\xff\xc1garbage", "malformed_message"),
+    "empty": (b"", "malformed_message"),
+    "not-a-map": (msgpack.packb([1, "step"]), "malformed_message"),
+    "unknown-type": (_raw(type="teleport"), "malformed_message"),
+    "wrong-type-actions": (_raw(type="step", actions="left"), "malformed_message"),
+    "wrong-type-seed": (_raw(type="reset", seed="7"), "malformed_message"),
+    "missing-field": (_raw(type="get"), "malformed_message"),
+    "extra-field": (_raw(type="ping", sudo=True), "malformed_message"),
+    "huge": (b"\x00" * (2 << 20), "message_too_large"),
+    "huge-but-valid": (_raw(type="step", actions=[0] * 1_200_000), "message_too_large"),
+    "wrong-version": (msgpack.packb({"v": 2, "type": "ping", "session": "s"}), "version_mismatch"),
+    "no-version": (msgpack.packb({"type": "ping", "session": "s"}), "malformed_message"),
+    "not-configured": (encode_request(Step(actions=[0, 0]), "stranger"), NOT_CONFIGURED),
+    "bad-option": (encode_request(Configure(options={"warp": 9}), "x"), "invalid_option"),
+}
+
+
+@pytest.mark.parametrize("case", MALFORMED, ids=list(MALFORMED))
+def test_malformed_input_gets_a_typed_error(raw_b: RawClient, case: str) -> None:
+    payload, code = MALFORMED[case]
+    reply = raw_b.send(payload)
+    assert isinstance(reply, ErrorReply) and reply.code == code, reply
+    assert isinstance(raw_b.send(encode_request(Ping())), OkReply)
+
+
+def test_refused_requests_leave_the_episode_intact(server_b: Server, raw_b: RawClient) -> None:
+    with RM(seed=8, port=server_b.port, launch=False) as remote:
+        local = Arena(seed=8)
+        rng = np.random.default_rng(8)
+        assert same(remote.reset(), local.reset())
+        owner = remote.session_id
+        hostile = [
+            *(payload for payload, _ in MALFORMED.values()),
+            encode_request(Step(actions=[0, 99]), owner),
+            encode_request(Step(actions=[0]), owner),
+            _raw(type="step", session=owner, actions=[[1, 2], {"x": 1}]),
+            _raw(type="reset", session=owner, contexts={"gravity": 1}),
+            encode_request(Configure(seed=1), "usurper"),
+            encode_request(Step(actions=[1, 1]), "usurper"),
+        ]
+        for _ in range(4):
+            for payload in hostile:
+                assert isinstance(raw_b.send(payload), ErrorReply)
+            actions = policy(local, rng)
+            assert same(remote.step(actions), local.step(actions))
+
+
+scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(-(2**63), 2**64 - 1), st.floats(), st.text(max_size=8)
+)
+wire_values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=6), inner, max_size=3)
+    ),
+    max_leaves=10,
+)
+request_maps = st.fixed_dictionaries(
+    {"session": st.just("fuzz")},
+    optional={
+        "v": st.one_of(st.just(PROTOCOL_VERSION), wire_values),
+        "type": st.one_of(st.sampled_from(sorted(MESSAGES)), st.text(max_size=10)),
+        "seed": wire_values,
+        "options": wire_values,
+        "contexts": wire_values,
+        "actions": wire_values,
+        "what": st.one_of(st.sampled_from(["obs", "state", "env_info"]), wire_values),
+        "junk": wire_values,
+    },
+).map(lambda wire: msgpack.packb(wire, use_bin_type=True))
+
+
+@settings(
+    max_examples=150,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+@given(st.one_of(st.binary(max_size=256), request_maps))
+def test_fuzzed_payloads_leave_the_server_answering(raw_b: RawClient, payload: bytes) -> None:
+    reply = raw_b.send(payload)
+    assert isinstance(reply, OkReply) or (
+        isinstance(reply, ErrorReply) and reply.code in {*ERRORS, NOT_CONFIGURED}
+    ), reply
+
+
+def test_server_still_correct_after_fuzzing(server_b: Server, raw_b: RawClient) -> None:
+    raw_b.send(encode_request(Close(), "fuzz"))  # in case the fuzz configured the server
+    with RM(seed=12, port=server_b.port, launch=False) as remote:
+        local = Arena(seed=12)
+        play_in_lockstep(remote, local, decisions=5, seed=12)
+
+
+def test_dead_hung_and_restarted_server(start_server: Callable[..., Server]) -> None:
+    port = free_port()
+    server = start_server(port=port)
+    env = RM(seed=3, port=port, launch=False, timeout=2.0)
+    try:
+        env.reset()
+        server.proc.send_signal(signal.SIGSTOP)  # hung: the query times out
+        t0 = time.monotonic()
+        with pytest.raises(ServerUnavailableError):
+            env.get_state()
+        assert 1.5 < time.monotonic() - t0 < 3.0
+        server.proc.send_signal(signal.SIGCONT)
+        server.proc.kill()  # dead: Zenoh ends the query at once
+        server.proc.wait()
+        t0 = time.monotonic()
+        with pytest.raises(ServerUnavailableError):
+            env.step([0, 0])
+        assert time.monotonic() - t0 < 2.5
+        restarted = start_server(port=port)  # back: the client configures it again
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                obs = env.reset()
+                break
+            except ServerUnavailableError:
+                assert time.monotonic() < deadline, "the client never reconnected"
+                time.sleep(0.2)
+        assert same(obs, Arena(seed=3).reset())
+    finally:
+        env.close()
+    t0 = time.monotonic()
+    assert restarted.stop(signal.SIGTERM) == 0
+    assert time.monotonic() - t0 < 1.0
+
+
+def test_port_in_use_fails_clearly(server_a: Server) -> None:
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1", 0))
+        squatter.listen()
+        for port in (server_a.port, squatter.getsockname()[1]):
+            cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(port)]
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+            assert done.returncode == 2
+            assert f"port {port} on 127.0.0.1 is already in use" in done.stderr
+
+
+def test_launch_paces_then_stops_its_server() -> None:
+    port = free_port()
+    with pytest.raises(ServerUnavailableError, match="launch=False"):
+        RM(port=port, launch=False)
+    env = RM(seed=4, port=port, time_scale=4)  # 0.4 s decisions at 4x: 0.1 s each
+    try:
+        assert env._server is not None
+        proc = env._server.proc
+        assert ping(port)["owned"] is True
+        assert same(env.reset(), Arena(seed=4).reset())
+        t0 = time.monotonic()
+        for _ in range(5):
+            env.step([0, 0])
+        assert time.monotonic() - t0 >= 0.4
+    finally:
+        env.close()
+    assert proc.poll() == 0
+    with pytest.raises(ServerUnavailableError):
+        ping(port, timeout=0.5)
+    env.close()  # twice is fine

@@ -1,0 +1,313 @@
+"""The codec and the messages: exact round trips, bounded decoding, typed refusals."""
+
+from __future__ import annotations
+
+import contextlib
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+from neuronsmae.protocol.codec import EXT_NDARRAY, EXT_SCALAR, decode, encode
+from neuronsmae.protocol.errors import (
+    ERRORS,
+    InvalidActionError,
+    MalformedMessageError,
+    MessageTooLargeError,
+    NeuronsMAEError,
+    VersionMismatchError,
+)
+from neuronsmae.protocol.messages import (
+    MAX_REQUEST_BYTES,
+    MESSAGES,
+    PROTOCOL_VERSION,
+    Close,
+    Configure,
+    Contexts,
+    ErrorReply,
+    Get,
+    OkReply,
+    Ping,
+    Render,
+    Reset,
+    Step,
+    decode_reply,
+    decode_request,
+    encode_reply,
+    encode_request,
+)
+
+LIMIT = 1 << 16
+
+
+def same(a: object, b: object) -> bool:
+    """Equal in type, dtype, shape and every byte (so -0.0 ≠ 0.0 and NaN == NaN)."""
+    if isinstance(a, (np.ndarray, np.generic)):
+        return (
+            type(a) is type(b)
+            and a.dtype == b.dtype  # type: ignore[union-attr]
+            and a.shape == b.shape  # type: ignore[union-attr]
+            and a.tobytes() == b.tobytes()  # type: ignore[union-attr]
+        )
+    if isinstance(a, (list, tuple)):
+        return isinstance(b, list) and len(a) == len(b) and all(map(same, a, b))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, float):
+        return type(b) is float and np.float64(a).tobytes() == np.float64(b).tobytes()
+    return type(a) is type(b) and a == b
+
+
+# ---- arrays ----------------------------------------------------------------------------
+
+DTYPES = ["<f4", "<f8", ">f8", "<i8", "<i4", "|i1", "|u1", "<u2", "|b1", "<c8", "<f2"]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("shape", [(), (0,), (3,), (2, 3), (0, 4), (2, 1, 3), (1,) * 5])
+def test_array_round_trip(dtype: str, shape: tuple[int, ...]) -> None:
+    rng = np.random.default_rng(0)
+    array = np.asarray(rng.standard_normal(shape) * 100).astype(dtype)
+    back = decode(encode(array), max_bytes=LIMIT)
+    assert same(array, back)
+    assert back.flags.writeable
+
+
+def test_non_contiguous_and_special_values() -> None:
+    base = np.arange(24, dtype=np.float32).reshape(4, 6)
+    for array in (base.T, base[::2, 1::3], np.array([np.nan, -0.0, np.inf, -np.inf])):
+        assert same(np.ascontiguousarray(array), decode(encode(array), max_bytes=LIMIT))
+
+
+@pytest.mark.parametrize(
+    "scalar", [np.float32(1.5), np.float64(-0.0), np.int64(-7), np.uint8(255), np.bool_(True)]
+)
+def test_numpy_scalars_keep_their_type(scalar: np.generic) -> None:
+    assert same(scalar, decode(encode(scalar), max_bytes=LIMIT))
+
+
+def test_nested_structures_and_tuples() -> None:
+    value = {"obs": [np.zeros(3, np.float32)], "info": {"t": 3, "winner": None, "x": (1, 2.5)}}
+    back = decode(encode(value), max_bytes=LIMIT)
+    assert same({**value, "info": {**value["info"], "x": [1, 2.5]}}, back)
+
+
+@pytest.mark.parametrize("bad", [np.array([object()]), np.array(["a"]), {1, 2}, object()])
+def test_unencodable_values_are_refused(bad: object) -> None:
+    with pytest.raises(MalformedMessageError):
+        encode(bad)
+
+
+def _ext(code: int, fields: list[object]) -> bytes:
+    return msgpack.packb(msgpack.ExtType(code, msgpack.packb(fields, use_bin_type=True)))
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        _ext(EXT_NDARRAY, ["|O", [1], b"\0" * 8]),  # object dtype
+        _ext(EXT_NDARRAY, ["<U4", [1], b"\0" * 16]),  # strings
+        _ext(EXT_NDARRAY, ["f4,i4", [1], b"\0" * 8]),  # structured
+        _ext(EXT_NDARRAY, ["nonsense", [1], b"\0"]),
+        _ext(EXT_NDARRAY, [3, [1], b"\0"]),
+        _ext(EXT_NDARRAY, ["<f4", [3], b"\0" * 8]),  # wrong byte count
+        _ext(EXT_NDARRAY, ["<f4", [-1], b""]),
+        _ext(EXT_NDARRAY, ["<f4", [True], b"\0" * 4]),
+        _ext(EXT_NDARRAY, ["<f4", [1] * 40, b"\0" * 4]),
+        _ext(EXT_NDARRAY, ["<f4", 4, b"\0" * 16]),
+        _ext(EXT_NDARRAY, ["<f4", [1]]),
+        _ext(EXT_SCALAR, ["<f4", [2], b"\0" * 8]),
+        _ext(99, ["<f4", [1], b"\0" * 4]),
+        msgpack.packb(msgpack.ExtType(EXT_NDARRAY, b"\xc1")),
+    ],
+)
+def test_bad_arrays_are_refused(payload: bytes) -> None:
+    with pytest.raises(MalformedMessageError):
+        decode(payload, max_bytes=LIMIT)
+
+
+# ---- bounded decoding ------------------------------------------------------------------
+
+
+def test_size_limit() -> None:
+    data = encode(b"x" * 2000)
+    assert decode(data, max_bytes=len(data)) == b"x" * 2000
+    with pytest.raises(MessageTooLargeError):
+        decode(data, max_bytes=len(data) - 1)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"\xdd\xff\xff\xff\xff",  # array32 claiming 4 billion items
+        b"\xdf\xff\xff\xff\xff",  # map32 claiming 4 billion pairs
+        b"\xdb\xff\xff\xff\xff",  # str32 claiming 4 GiB
+        b"\xc6\xff\xff\xff\xff",  # bin32 claiming 4 GiB
+        b"\xc9\xff\xff\xff\xff\x01",  # ext32 claiming 4 GiB
+        b"\x91" * 5000 + b"\x00",  # nesting deeper than the decoder's stack
+        b"",
+        b"\xc1",  # never-used byte
+        b"\x92\x01",  # truncated
+        b"\x01\x02",  # trailing bytes
+        b"\xa2\xff\xfe",  # invalid UTF-8
+        msgpack.packb({(1, 2): 3}),  # unhashable key
+    ],
+)
+def test_hostile_lengths_and_garbage_are_refused(payload: bytes) -> None:
+    with pytest.raises(MalformedMessageError):
+        decode(payload, max_bytes=10_000)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=512))
+def test_random_bytes_decode_or_fail_typed(data: bytes) -> None:
+    with contextlib.suppress(MalformedMessageError, MessageTooLargeError):
+        decode(data, max_bytes=256)
+
+
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**63), max_value=2**64 - 1),
+    st.floats(allow_nan=False),
+    st.text(max_size=20),
+    st.binary(max_size=20),
+)
+arrays = hnp.arrays(
+    dtype=st.sampled_from(DTYPES),
+    shape=hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=4),
+)
+values = st.recursive(
+    st.one_of(scalars, arrays),
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+@given(values)
+def test_random_structures_round_trip(value: object) -> None:
+    assert same(value, decode(encode(value), max_bytes=1 << 20))
+
+
+# ---- messages --------------------------------------------------------------------------
+
+REQUESTS = [
+    Configure(),
+    Configure(seed=7, options={"action_space": "continuous", "n_blue": 3, "lidar": True}),
+    Reset(),
+    Reset(contexts={"Friction_coeff": 0.3, "level": "hard"}, seed=12),
+    Step(actions=[1, 2]),
+    Step(actions=[[0.5, -0.5, 0.1, 3.0], [0.0, 0.0, 0.0, 2.0]]),
+    Step(actions=np.array([3, 4], dtype=np.int64)),
+    *(Get(what=w) for w in ("obs", "state", "avail_actions", "env_info")),
+    Contexts(),
+    Render(),
+    Ping(),
+    Close(),
+]
+
+
+def test_every_message_type_is_covered() -> None:
+    assert {type(r) for r in REQUESTS} == set(MESSAGES.values())
+
+
+@pytest.mark.parametrize("body", REQUESTS, ids=lambda r: type(r).__name__)
+def test_request_round_trip(body: object) -> None:
+    request = decode_request(encode_request(body, session="abc"))  # type: ignore[arg-type]
+    assert request.session == "abc"
+    assert type(request.body) is type(body)
+    for name, value in vars(body).items():
+        assert same(value, getattr(request.body, name))
+
+
+@pytest.mark.parametrize(
+    "reply",
+    [
+        OkReply(None),
+        OkReply([[np.ones(3, np.float32)], [0.5, -0.0], True, {"winner": "blue"}]),
+        OkReply(np.zeros((4, 5, 3), np.uint8)),
+        *(ErrorReply(code, f"message for {code}") for code in ERRORS),
+    ],
+)
+def test_reply_round_trip(reply: object) -> None:
+    back = decode_reply(encode_reply(reply))  # type: ignore[arg-type]
+    assert type(back) is type(reply) and same(vars(reply), vars(back))
+
+
+def _raw(**fields: object) -> bytes:
+    return msgpack.packb({"v": PROTOCOL_VERSION, "session": "s", **fields}, use_bin_type=True)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        msgpack.packb([1, 2, 3]),
+        msgpack.packb("step"),
+        msgpack.packb({"type": "ping"}),  # no version
+        _raw(type="teleport"),
+        _raw(type=None),
+        _raw(type="step"),  # missing actions
+        _raw(type="step", actions="up"),
+        _raw(type="step", actions={"a": 1}),
+        _raw(type="step", actions=[1], extra=1),
+        _raw(type="get", what="secrets"),
+        _raw(type="reset", seed="7"),
+        _raw(type="reset", seed=-1),
+        _raw(type="reset", seed=True),
+        _raw(type="reset", contexts=[1, 2]),
+        _raw(type="configure", options={1: 2}),
+        _raw(type="ping", session=5),
+        msgpack.packb({"v": 1, "type": "ping", "session": "x" * 200}),
+    ],
+)
+def test_malformed_requests(payload: bytes) -> None:
+    with pytest.raises(MalformedMessageError):
+        decode_request(payload)
+
+
+@pytest.mark.parametrize("version", [0, 2, 99, "1", 1.0, True, None])
+def test_version_mismatch_names_both_versions(version: object) -> None:
+    with pytest.raises(VersionMismatchError, match=rf"{version!r}.*{PROTOCOL_VERSION}"):
+        decode_request(msgpack.packb({"v": version, "type": "ping", "session": "s"}))
+
+
+def test_oversized_request() -> None:
+    with pytest.raises(MessageTooLargeError):
+        decode_request(encode_request(Step(actions=[b"x" * MAX_REQUEST_BYTES])))
+
+
+@pytest.mark.parametrize("payload", [b"", msgpack.packb([]), msgpack.packb({"ok": "yes"})])
+def test_malformed_replies(payload: bytes) -> None:
+    with pytest.raises(MalformedMessageError):
+        decode_reply(payload)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.dictionaries(
+        st.sampled_from(
+            ["v", "type", "session", "seed", "options", "contexts", "actions", "what", "junk"]
+        ),
+        st.one_of(values, st.sampled_from([*MESSAGES, PROTOCOL_VERSION])),
+        max_size=6,
+    )
+)
+def test_random_request_maps_decode_or_fail_typed(wire: dict[str, object]) -> None:
+    try:
+        decode_request(encode(wire))
+    except NeuronsMAEError as exc:
+        assert type(exc) in (MalformedMessageError, VersionMismatchError, MessageTooLargeError)
+
+
+def test_errors_keep_their_type_across_the_wire() -> None:
+    from neuronsmae.protocol.errors import error_from_code
+
+    reply = decode_reply(encode_reply(ErrorReply.from_exception(InvalidActionError("bad"))))
+    assert isinstance(reply, ErrorReply)
+    exc = error_from_code(reply.code, reply.message)
+    assert type(exc) is InvalidActionError and isinstance(exc, ValueError)

@@ -1,0 +1,202 @@
+"""The in-process arena: dynamics contexts, collisions, episode ends, determinism, contexts."""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, ResetNeededError
+from neuronsmae.server import Arena
+from neuronsmae.server.sim import field as F
+from tests.server.conftest import still
+
+START = np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (7.4, 3.9, np.pi), (7.5, 0.6, np.pi)])
+"""blue_0 on an open lane along y = 1.9 (B6 is at y 2.15..2.33, B4 starts at x 3.55)."""
+
+
+def drive(contexts: dict, cmd: tuple = (2.0, 0.0, 0.0), decisions: int = 1,
+          then_stop: int = 0) -> np.ndarray:
+    """blue_0's x after driving ``cmd`` from rest, optionally then commanding zero."""
+    a = Arena(seed=1, action_space="continuous", mode="competitive")
+    a.reset(contexts)
+    a.place(START, bullets=[0, 0, 0, 0])
+    xs = []
+    for k in range(decisions + then_stop):
+        c = cmd if k < decisions else (0.0, 0.0, 0.0)
+        a.step([np.array([*c, 0])] + still(3))
+        xs.append(a.poses[0].copy())
+    a.close()
+    return np.array(xs)
+
+
+def test_two_metres_per_second_settles_near_spec() -> None:
+    x = drive({"Friction_coeff": 0.1}, decisions=2)
+    # Second decision: settled; 0.4 s at ~1.97 m/s.
+    assert (x[1, 0] - x[0, 0]) / 0.4 == pytest.approx(1.975, abs=0.01)
+    x = drive({"Friction_coeff": 0.5}, decisions=2)
+    assert (x[1, 0] - x[0, 0]) / 0.4 == pytest.approx(1.875, abs=0.015)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "slower"),
+    [("M", 10.0, True), ("Wheel_I", 0.05, True), ("VK1", 1.5, False), ("VK1", 0.1, True),
+     ("KP", 2.0, True), ("vy_dt", 0.2, True), ("vx_dt", 0.2, False)],
+)
+def test_dynamics_keys_move_the_step_response(key: str, value: float, slower: bool) -> None:
+    base = drive({})[0, 0] - START[0, 0]
+    moved = drive({key: value})[0, 0] - START[0, 0]
+    if key == "vx_dt":  # a lateral delay leaves a forward command untouched
+        assert moved == pytest.approx(base, abs=1e-9)
+    elif slower:
+        assert moved < base - 1e-3
+    else:
+        assert moved > base + 1e-3
+
+
+def test_lower_friction_coasts_longer() -> None:
+    def coast(mu: float) -> float:
+        x = drive({"Friction_coeff": mu}, decisions=1, then_stop=1)
+        return x[1, 0] - x[0, 0]
+
+    assert coast(0.05) > coast(0.5) + 1e-3
+
+
+def test_opponent_dynamics_apply_to_red_only() -> None:
+    a = Arena(seed=1, action_space="continuous", mode="competitive")
+    a.reset({"opponent.VK1": 0.05, "opponent_speed": 0.5})
+    a.place(np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (1.0, 0.6, 0.0), (7.5, 3.9, np.pi)]),
+            bullets=[0, 0, 0, 0])
+    fwd = np.array([2.0, 0.0, 0.0, 0])
+    a.step([fwd, still(1)[0], fwd, still(1)[0]])
+    assert a.poses[0, 0] - 1.0 > 2 * (a.poses[2, 0] - 1.0)
+    a.close()
+
+
+def test_robots_cannot_pass_walls_or_obstacles() -> None:
+    a = Arena(seed=1, action_space="continuous", mode="competitive")
+    a.reset()
+    # blue_0 drives at the right wall, blue_1 at B5 from below, red_0 diagonally into a corner.
+    a.place(np.array([(6.8, 1.9, 0.0), (4.04, 2.8, np.pi / 2), (1.0, 1.0, np.pi), (7.5, 3.9, 0)]),
+            bullets=[0, 0, 0, 0])
+    push = np.array([2.0, 0.0, 0.0, 0])
+    diag = np.array([1.5, -1.5, 0.0, 0])
+    for _ in range(10):
+        a.step([push, push, diag, still(1)[0]])
+    assert a.poses[0, 0] <= F.FIELD_X - F.ROBOT_LENGTH / 2 + 0.01
+    assert a.poses[1, 1] <= 3.445 - 0.0915 - F.ROBOT_LENGTH / 2 + 0.01
+    assert a.poses[2, 0] >= F.ROBOT_WIDTH / 2 - 0.01 and a.poses[2, 1] >= F.ROBOT_WIDTH / 2 - 0.01
+    a.close()
+
+
+def test_episode_ends_on_time() -> None:
+    a = Arena(seed=4, action_space="continuous", mode="competitive")
+    a.reset()
+    a.place(a.poses.copy(), bullets=[0, 0, 0, 0])
+    steps, done, info = 0, False, {}
+    while not done:
+        _, _, done, info = a.step(still())
+        steps += 1
+    assert steps == 50 and info["t"] == F.EPISODE_STEPS and info["winner"] == "draw"
+    with pytest.raises(ResetNeededError):
+        a.step(still())
+    a.close()
+
+
+def test_step_before_reset_is_typed_error() -> None:
+    a = Arena(seed=1)
+    with pytest.raises(ResetNeededError):
+        a.step([0, 0])
+    a.close()
+
+
+def _trajectory(seed: int) -> str:
+    a = Arena(seed=seed)
+    h = hashlib.sha256()
+    for _ in range(2):
+        obs = a.reset({"level": "middle"})
+        rng = np.random.default_rng(0)
+        done = False
+        while not done:
+            acts = [int(rng.choice(np.flatnonzero(m))) for m in a.get_avail_actions()]
+            obs, rewards, done, info = a.step(acts)
+            for o in obs:
+                h.update(o.tobytes())
+            h.update(np.array(rewards).tobytes())
+        h.update(a.get_state().tobytes())
+    a.close()
+    return h.hexdigest()
+
+
+def test_determinism_within_and_across_processes() -> None:
+    first = _trajectory(42)
+    assert _trajectory(42) == first
+    assert _trajectory(43) != first
+    code = "from tests.server.test_arena import _trajectory; print(_trajectory(42))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=str(__import__("pathlib").Path(__file__).parents[2]))
+    assert out.stdout.strip().splitlines()[-1] == first
+
+
+def test_two_arenas_in_one_process_do_not_interfere() -> None:
+    a, b = Arena(seed=9), Arena(seed=9)
+    oa, ob = a.reset(), b.reset()
+    for _ in range(10):
+        oa, *_ = a.step([1, 2])
+        ob, *_ = b.step([1, 2])
+    np.testing.assert_array_equal(np.stack(oa), np.stack(ob))
+    assert a.world.client != b.world.client
+    a.close()
+    b.close()
+
+
+def test_original_context_dicts_work() -> None:
+    a = Arena(seed=1)
+    a.reset({"coef": 0.5, "level": 1.0})
+    assert a.context.coef == 0.5 and a.context.level == "middle"
+    a.reset({"VK1": 0.0375, "level": 0})
+    assert a.context.blue_dynamics["vk1"] == 0.0375 and a.context.level == "easy"
+    a.close()
+
+
+@pytest.mark.parametrize(
+    ("contexts", "needle"),
+    [({"VK2": 1.0}, "VK2"), ({"coef": -1.0}, "coef"), ({"level": 7}, "level"),
+     ({"M": float("nan")}, "M"), ({"KP": "fast"}, "KP"), ({"level": [1]}, "level")],
+)
+def test_bad_contexts_name_the_key(contexts: dict, needle: str) -> None:
+    a = Arena(seed=1)
+    with pytest.raises(InvalidContextError, match=needle) as err:
+        a.reset(contexts)
+    assert isinstance(err.value, ValueError)
+    a.close()
+
+
+def test_bad_options_list_valid_ones() -> None:
+    with pytest.raises(InvalidOptionError, match="valid options"):
+        Arena(seed=1, warp_speed=True)
+    with pytest.raises(InvalidOptionError, match="abstract"):
+        Arena(seed=1, action_space="teleport")
+
+
+def test_random_spawns_follow_released_rule() -> None:
+    a = Arena(seed=3)
+    for s in range(30):
+        a.reset(seed=s)
+        xy = a.poses[:, :2]
+        assert ((xy[:, 0] >= 0.40) & (xy[:, 0] < 7.80)).all()
+        assert ((xy[:, 1] >= 0.40) & (xy[:, 1] < 4.00)).all()
+        d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))
+        assert d[np.triu_indices(4, 1)].min() >= 0.80
+        assert np.allclose(np.round(xy * 100), xy * 100)
+    a.close()
+
+
+def test_corner_spawns() -> None:
+    a = Arena(seed=3, spawn="corners")
+    a.reset()
+    np.testing.assert_allclose(a.poses[:, :2], np.array(F.BIRTH_AREAS))
+    a.close()

@@ -1,0 +1,147 @@
+"""The arena service without a network: ownership, rebuild rules, pacing, refusals."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import msgpack
+import numpy as np
+import pytest
+from neuronsmae.protocol.errors import ERRORS
+from neuronsmae.protocol.messages import (
+    NOT_CONFIGURED,
+    Close,
+    Configure,
+    Contexts,
+    ErrorReply,
+    Get,
+    Message,
+    OkReply,
+    Ping,
+    Reply,
+    Reset,
+    Step,
+    decode_reply,
+    encode_request,
+)
+from neuronsmae.server.arena import Arena
+from neuronsmae.server.contexts import context_table
+from neuronsmae.server.service import ArenaService, Pacer
+
+
+class Clock:
+    """A settable monotonic clock, so lease expiry is tested without sleeping."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture(scope="module")
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture(scope="module")
+def service(clock: Clock) -> Iterator[ArenaService]:
+    with ArenaService(Arena, seed=5, lease_s=10.0, context_table=context_table, clock=clock) as svc:
+        yield svc
+
+
+def call(service: ArenaService, body: Message, session: str) -> Reply:
+    return decode_reply(service.handle(encode_request(body, session)))
+
+
+def value(service: ArenaService, body: Message, session: str) -> object:
+    reply = call(service, body, session)
+    assert isinstance(reply, OkReply), reply
+    return reply.value
+
+
+def code(service: ArenaService, body: Message, session: str) -> str:
+    reply = call(service, body, session)
+    assert isinstance(reply, ErrorReply), reply
+    return reply.code
+
+
+def test_open_requests_and_not_configured(service: ArenaService) -> None:
+    assert value(service, Ping(), "anyone")["server"] == service.server_id  # type: ignore[index]
+    assert value(service, Contexts(), "anyone") == context_table()
+    assert code(service, Reset(), "stranger") == NOT_CONFIGURED
+    assert code(service, Step(actions=[0, 0]), "stranger") == NOT_CONFIGURED
+
+
+def test_ownership_busy_close_and_lease(service: ArenaService, clock: Clock) -> None:
+    assert value(service, Configure(seed=5), "a")["rebuilt"] is False  # type: ignore[index]
+    assert code(service, Configure(seed=5), "b") == "busy"
+    assert code(service, Get(what="obs"), "b") == "busy"
+    assert value(service, Close(), "b") is None  # not the owner: nothing happens
+    assert code(service, Get(what="state"), "b") == "busy"
+    value(service, Close(), "a")
+    assert value(service, Configure(seed=5), "b")["rebuilt"] is False  # type: ignore[index]
+    clock.now += 11.0  # b falls silent past the lease: a may take over
+    value(service, Configure(seed=5), "a")
+    assert code(service, Reset(), "b") == "busy"
+    value(service, Close(), "a")
+
+
+def test_configure_rebuilds_exactly_when_needed(service: ArenaService) -> None:
+    assert value(service, Configure(seed=5), "c")["rebuilt"] is False  # type: ignore[index]
+    value(service, Reset(), "c")
+    assert value(service, Configure(seed=5), "c")["rebuilt"] is False  # type: ignore[index]
+    value(service, Close(), "c")
+    # Another session after episodes were run gets a fresh arena: same seed, same episode.
+    assert value(service, Configure(seed=5), "d")["rebuilt"] is True  # type: ignore[index]
+    first = value(service, Reset(), "d")
+    expected = Arena(seed=5).reset()
+    assert all(np.array_equal(a, b) for a, b in zip(first, expected, strict=True))  # type: ignore[call-overload]
+    opts = {"action_space": "discrete"}
+    assert value(service, Configure(seed=5, options=opts), "d")["rebuilt"] is True  # type: ignore[index]
+    assert value(service, Get(what="env_info"), "d")["action_space"] == "discrete"  # type: ignore[index]
+    value(service, Close(), "d")
+
+
+def test_refusals_leave_the_episode_untouched(service: ArenaService) -> None:
+    value(service, Configure(seed=9), "e")
+    local = Arena(seed=9)
+    assert code(service, Step(actions=[0, 0]), "e") == "reset_needed"
+    value(service, Reset(seed=3), "e")
+    local.reset(seed=3)
+    bad = [
+        b"\xc1",
+        msgpack.packb({"v": 1, "type": "step", "session": "e", "actions": "x"}),
+        msgpack.packb({"v": 7, "type": "step", "session": "e", "actions": [0, 0]}),
+        encode_request(Step(actions=[0, 99]), "e"),
+        encode_request(Step(actions=[0]), "e"),
+        encode_request(Step(actions=[[1, 2], {}]), "e"),
+        encode_request(Reset(contexts={"gravity": 1.0}), "e"),
+        encode_request(Configure(options={"warp": 9}), "e"),
+        encode_request(Step(actions=[1, 1]), "intruder"),
+    ]
+    for rep in range(3):
+        for payload in bad:
+            reply = decode_reply(service.handle(payload))
+            assert isinstance(reply, ErrorReply) and reply.code in ERRORS, reply
+        actions = [rep % 8, (rep * 3) % 8]
+        remote = value(service, Step(actions=actions), "e")
+        obs, rewards, done, info = local.step(actions)
+        assert all(np.array_equal(a, b) for a, b in zip(remote[0], obs, strict=True))  # type: ignore[index]
+        assert remote[1:] == [rewards, done, info]  # type: ignore[index]
+    value(service, Close(), "e")
+
+
+def test_pacer_holds_the_rate() -> None:
+    clock = Clock()
+    slept: list[float] = []
+    pacer = Pacer(0.5, clock=clock, sleep=slept.append)
+    pacer.wait()  # the first call never waits
+    clock.now += 0.2
+    pacer.wait()  # 0.3 s of the period left
+    clock.now += 0.5 + 0.3 + 1.0  # a long pause: no burst to catch up afterwards
+    pacer.wait()
+    pacer.wait()
+    assert slept == pytest.approx([0.3, 0.5])
+    Pacer(0.0, sleep=slept.append).wait()  # unlimited: returns at once
+    assert len(slept) == 2

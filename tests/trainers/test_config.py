@@ -1,0 +1,88 @@
+"""Configuration layers: defaults, files, --set overrides; unknown keys are errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from neuronsmae.trainers.cli import build_parser, config_from_args
+from neuronsmae.trainers.config import (
+    ConfigError,
+    TrainConfig,
+    field_docs,
+    make_config,
+    parse_overrides,
+    read_config_file,
+)
+
+
+def test_defaults_are_the_papers_hyper_parameters() -> None:
+    cfg = TrainConfig()
+    assert (cfg.lr, cfg.gamma, cfg.eps_start, cfg.eps_end) == (5e-4, 0.99, 0.2, 0.05)
+    assert (cfg.grad_clip, cfg.agent_hidden, cfg.mixer_embed) == (10.0, 128, 32)
+
+
+def test_every_field_has_a_docstring() -> None:
+    docs = field_docs()
+    assert set(docs) == set(TrainConfig().to_dict())
+    assert all(doc.strip() for doc in docs.values())
+
+
+def test_set_overrides_are_typed() -> None:
+    cfg = make_config(
+        parse_overrides(["lr=1e-3", "batch_size=8", "double_q=false", "alg=qmix", "episodes=1e3"])
+    )
+    assert cfg.lr == 1e-3 and cfg.batch_size == 8 and cfg.double_q is False
+    assert cfg.alg == "qmix" and cfg.episodes == 1000
+
+
+@pytest.mark.parametrize(
+    ("items", "message"),
+    [
+        (["learning_rate=1"], "unknown config key.*'learning_rate'.*valid:"),
+        (["lr"], "key=value"),
+        (["batch_size=big"], "batch_size expects int"),
+        (["double_q=maybe"], "expects a bool"),
+        (["alg=mappo"], "valid: iql, qmix, vdn"),
+        (["level=expert"], "valid: easy, middle, hard"),
+        (["batch_size=0"], "batch_size must be"),
+    ],
+)
+def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        make_config(parse_overrides(items))
+
+
+def test_unknown_key_suggests_the_close_one() -> None:
+    with pytest.raises(ConfigError, match="did you mean 'batch_size'"):
+        make_config({"batchsize": 3})
+
+
+def test_files_toml_and_json(tmp_path: Path) -> None:
+    toml = tmp_path / "c.toml"
+    toml.write_text('[train]\nalg = "iql"\nlr = 0.001\nworkers = 3\n')
+    assert read_config_file(toml) == {"alg": "iql", "lr": 0.001, "workers": 3}
+    js = tmp_path / "c.json"
+    js.write_text(json.dumps({"gamma": 0.9, "typo_key": 1}))
+    with pytest.raises(ConfigError, match="typo_key"):
+        read_config_file(js)
+    with pytest.raises(ConfigError, match=r"\.toml or \.json"):
+        read_config_file(tmp_path / "c.yaml")
+
+
+def test_cli_layers_flags_win_over_set_and_file(tmp_path: Path) -> None:
+    f = tmp_path / "c.json"
+    f.write_text(json.dumps({"alg": "iql", "lr": 0.002, "seed": 4}))
+    args = build_parser().parse_args(
+        ["--config", str(f), "--set", "lr=0.003", "--alg", "qmix", "--level", "hard"]
+    )
+    cfg = config_from_args(args)
+    assert (cfg.alg, cfg.level, cfg.lr, cfg.seed) == ("qmix", "hard", 0.003, 4)
+    assert str(cfg.run_dir) == "runs/qmix_hard_s4"
+
+
+def test_resume_without_a_run_is_an_error(tmp_path: Path) -> None:
+    args = build_parser().parse_args(["--resume", "--out", str(tmp_path / "none")])
+    with pytest.raises(ConfigError, match="--resume"):
+        config_from_args(args)

@@ -1,0 +1,98 @@
+"""The Q-learning core: it learns a known value, handles dead agents, refreshes targets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from neuronsmae.trainers.buffer import EpisodeReplayBuffer
+from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec, lambda_returns
+
+from .conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode
+
+
+def _learner(mixer: str, **kw: object) -> QLearner:
+    env = EnvSpec(N_AGENTS, ACTIONS, OBS, STATE, LIMIT)
+    args = {
+        "lr": 5e-3,
+        "gamma": 0.9,
+        "grad_clip": 10.0,
+        "target_update_interval": 5,
+        "double_q": True,
+        "mixer_embed": 8,
+        "hypernet_hidden": 8,
+    } | kw
+    return QLearner(env, agent_spec(env, 16, True, True), mixer, **args)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("mixer", ["none", "vdn", "qmix"])
+def test_learns_one_step_reward(mixer: str) -> None:
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    buf = EpisodeReplayBuffer(32, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(32):
+        ep = make_episode(1, rng, dead_from=None)
+        ep.rewards[:] = 2.0
+        buf.add(ep)
+    learner = _learner(mixer)
+    for _ in range(300):
+        stats = learner.train(buf.sample(32, rng))
+    assert stats["loss"] < 0.05
+    assert stats["q_taken"] == pytest.approx(2.0, abs=0.2)
+    assert learner.updates == 300
+
+
+def test_target_refresh_interval() -> None:
+    rng = np.random.default_rng(1)
+    buf = EpisodeReplayBuffer(8, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(8):
+        buf.add(make_episode(LIMIT, rng, dead_from=3))
+    learner = _learner("qmix", target_update_interval=3)
+    for k in range(1, 7):
+        learner.train(buf.sample(4, rng))
+        same = all(
+            torch.equal(a, b)
+            for a, b in zip(
+                learner.agent.state_dict().values(),
+                learner.target_agent.state_dict().values(),
+                strict=True,
+            )
+        )
+        assert same == (k % 3 == 0)
+
+
+@pytest.mark.parametrize("mixer", ["none", "vdn", "qmix"])
+def test_destroyed_agent_does_not_affect_the_loss(mixer: str) -> None:
+    rng = np.random.default_rng(2)
+    buf = EpisodeReplayBuffer(1, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    buf.add(make_episode(LIMIT, rng, dead_from=0))  # agent 1 destroyed throughout
+    batch = buf.sample(1, rng)
+    losses = []
+    for scale in (1.0, 100.0):
+        torch.manual_seed(0)
+        learner = _learner(mixer)
+        batch.obs[:, :, 1] = scale  # agent 1's input changes its Q, but it is masked out
+        losses.append(learner.train(batch)["loss"])
+    assert losses[0] == pytest.approx(losses[1], rel=1e-6)
+
+
+def test_state_dict_round_trip() -> None:
+    a, b = _learner("vdn"), _learner("vdn")
+    a.updates = 7
+    b.load_state_dict(a.state_dict())
+    assert b.updates == 7
+    for x, y in zip(a.agent.parameters(), b.agent.parameters(), strict=True):
+        assert torch.equal(x, y)
+
+
+def test_lambda_returns_by_hand() -> None:
+    r = torch.tensor([[1.0, 2.0, 3.0]]).unsqueeze(-1)
+    d = torch.tensor([[0.0, 0.0, 1.0]]).unsqueeze(-1)
+    v = torch.tensor([[10.0, 20.0, 99.0]]).unsqueeze(-1)  # values after steps 0, 1, 2
+    g, lam = 0.5, 0.5
+    one = lambda_returns(r, d, v, g, 0.0).flatten().tolist()
+    assert one == [1 + g * 10, 2 + g * 20, 3.0]
+    g2 = 3.0
+    g1 = 2 + g * ((1 - lam) * 20 + lam * g2)
+    g0 = 1 + g * ((1 - lam) * 10 + lam * g1)
+    assert lambda_returns(r, d, v, g, lam).flatten().tolist() == pytest.approx([g0, g1, g2])

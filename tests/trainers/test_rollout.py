@@ -1,0 +1,80 @@
+"""A rollout worker on the real in-process arena: whole episodes, and nothing on failure."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from neuronsmae.trainers.buffer import EpisodeReplayBuffer
+from neuronsmae.trainers.learner import EnvSpec, agent_spec
+from neuronsmae.trainers.rollout import Policy, RolloutWorker
+
+
+class EnvFailure(RuntimeError):
+    """Raised by the wrapper below, standing in for a dead env server."""
+
+
+class FailingStep:
+    """Wraps a real arena and raises on the ``fail_at``-th step (a crash mid-episode)."""
+
+    def __init__(self, env: Any, fail_at: int) -> None:
+        self.env, self.fail_at, self.steps = env, fail_at, 0
+
+    def step(self, actions: Any) -> Any:
+        self.steps += 1
+        if self.steps == self.fail_at:
+            raise EnvFailure("env server died")
+        return self.env.step(actions)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.env, name)
+
+
+@pytest.fixture(scope="module")
+def worker() -> Iterator[RolloutWorker]:
+    w = RolloutWorker(0, "inprocess", env_seed=5, port=0)
+    yield w
+    w.close()
+
+
+def _policy(w: RolloutWorker) -> tuple[Policy, EnvSpec]:
+    env = EnvSpec.from_env_info(w.env_info())
+    spec = agent_spec(env, 16, True, True)
+    weights = {k: v.numpy() for k, v in spec.build().state_dict().items()}
+    return Policy(spec, weights), env
+
+
+def test_whole_episode_is_valid_and_storable(worker: RolloutWorker) -> None:
+    policy, env = _policy(worker)
+    ep = worker.run_episode(policy, 0, 1.0, seed=11, contexts={"level": "easy"})
+    assert ep.terminated and 1 <= ep.length <= env.episode_limit
+    assert ep.info["winner"] in ("blue", "red", "draw")
+    assert ep.length == env.episode_limit or ep.info["winner"] != "draw"
+    buf = EpisodeReplayBuffer(
+        2, env.n_agents, env.obs_dim, env.state_dim, env.n_actions, env.episode_limit
+    )
+    buf.add(ep)
+    # a destroyed robot only ever took its no-op
+    dead = ~ep.alive[:-1]
+    assert (ep.actions[dead] == 0).all()
+    assert np.isfinite(ep.obs).all() and np.isfinite(ep.state).all()
+
+
+def test_same_seed_same_greedy_episode(worker: RolloutWorker) -> None:
+    policy, _ = _policy(worker)
+    a = worker.run_episode(policy, 0, 0.0, seed=3, contexts={"level": "easy"})
+    b = worker.run_episode(policy, 0, 0.0, seed=3, contexts={"level": "easy"})
+    assert np.array_equal(a.actions, b.actions) and np.allclose(a.rewards, b.rewards)
+
+
+def test_env_failure_mid_episode_returns_nothing(worker: RolloutWorker) -> None:
+    policy, _ = _policy(worker)
+    real = worker.env
+    worker.env = FailingStep(real, fail_at=5)  # type: ignore[assignment]
+    try:
+        with pytest.raises(EnvFailure):
+            worker.run_episode(policy, 0, 0.2, seed=4, contexts={"level": "easy"})
+    finally:
+        worker.env = real

@@ -1,0 +1,135 @@
+"""Training through Ray: the CLI end to end with resume, the sync loop, and worker faults.
+
+One local Ray (2 CPUs) serves the whole module; workers ask for half a CPU each so two of
+them fit beside the learner. The runs are tiny (a few episodes, a 16-unit GRU): they check
+the plumbing, not learning.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import ray
+import torch
+from neuronsmae.trainers.cli import main
+from neuronsmae.trainers.config import make_config
+from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint
+from neuronsmae.trainers.train import Trainer, train_seed
+
+pytestmark = [pytest.mark.ray, pytest.mark.slow]
+
+TINY = [
+    "eval_episodes=2",
+    "batch_size=4",
+    "learning_starts=4",
+    "worker_cpus=0.5",
+    "agent_hidden=16",
+    "hypernet_hidden=8",
+    "mixer_embed=8",
+    "train_every=1",
+]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_ray() -> Iterator[None]:
+    ray.init(
+        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+    )
+    yield
+    ray.shutdown()
+
+
+def _sets(*extra: str) -> list[str]:
+    return [arg for kv in (*TINY, *extra) for arg in ("--set", kv)]
+
+
+def _episodes_column(path: Path) -> list[int]:
+    with path.open() as f:
+        return [int(row["episodes"]) for row in csv.DictReader(f)]
+
+
+def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    base = ["--alg", "qmix", "--level", "easy", "--workers", "2", "--out", str(out), "--quiet"]
+    assert main([*base, "--episodes", "8", *_sets("eval_every=4")]) == 0
+    first = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert first["counters"]["episodes"] == 8 and first["counters"]["updates"] > 0
+    assert first["config"]["alg"] == "qmix" and first["config"]["workers"] == 2
+
+    assert main(["--resume", "--out", str(out), "--episodes", "12", "--quiet"]) == 0
+    second = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert second["counters"]["episodes"] == 12
+    assert second["counters"]["updates"] > first["counters"]["updates"]
+    assert second["counters"]["env_steps"] > first["counters"]["env_steps"]
+    assert second["config"]["agent_hidden"] == 16  # the saved config was kept
+    steps = _episodes_column(out / "train.csv")
+    assert steps == sorted(steps) and steps[-1] == 12
+    assert _episodes_column(out / "eval.csv")[-1] == 12
+
+    result = evaluate_checkpoint(out, "easy", episodes=2, seed=7)
+    assert 0.0 <= result["win_rate"] <= 1.0 and result["eval_episodes"] == 2
+    assert result["episodes_trained"] == 12 and result["alg"] == "qmix"
+    policy = GreedyPolicy(out / "checkpoint.pt")
+    actions = policy.act([np.zeros(37, np.float32)] * 2, [np.eye(8, dtype=np.int8)[3]] * 2)
+    assert actions == [3, 3]
+
+
+def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
+    cfg = make_config(
+        {
+            "alg": "iql",
+            "workers": 2,
+            "episodes": 4,
+            "sync": True,
+            "out": str(tmp_path),
+            "progress": False,
+            "eval_every": 0,
+        },
+        dict(kv.split("=") for kv in TINY),
+        {"learning_starts": 2},
+    )
+    trainer = Trainer(cfg)
+    result = trainer.run()
+    assert result["counters"]["episodes"] == 4
+    assert trainer.learner.updates == 2  # one training round per iteration of 2 episodes
+
+
+def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: Path) -> None:
+    n = 10
+    cfg = make_config(
+        {
+            "alg": "vdn",
+            "workers": 2,
+            "episodes": n,
+            "out": str(tmp_path),
+            "progress": False,
+            "eval_every": 0,
+        },
+        dict(kv.split("=") for kv in TINY),
+    )
+    killed: list[int] = []
+
+    def kill_worker_mid_run(trainer: Trainer) -> None:
+        busy = {t.worker for t in trainer.sampler.in_flight.values()}
+        if not killed and trainer.counters.episodes >= 3 and 0 in busy:
+            ray.kill(trainer.sampler.actors[0])  # the actor dies while playing an episode
+            killed.append(trainer.counters.episodes)
+
+    trainer = Trainer(cfg, hook=kill_worker_mid_run)
+    result = trainer.run()
+    assert killed and result["counters"]["restarts"] >= 1
+    assert result["counters"]["episodes"] == n
+    # every training seed was stored exactly once: the interrupted one was replayed whole
+    assert sorted(trainer.stored_seeds) == sorted(
+        train_seed(cfg.seed, k, cfg.eval_seed) for k in range(n)
+    )
+    buf = trainer.buffer
+    for i in range(len(buf)):
+        steps = int(buf.lengths[i])
+        assert buf.filled[i, :steps].all() and not buf.filled[i, steps:].any()
+        assert buf.terminated[i, steps - 1] == 1

@@ -1,0 +1,96 @@
+"""Checkpoints: everything a run needs to resume, loadable with ``weights_only=True``.
+
+A checkpoint holds only tensors and plain Python values (config as a dict, counters, RNG
+states as tuples and dicts), so ``torch.load(path, weights_only=True)`` reads it: loading a
+checkpoint never executes pickled code. It is written to a temporary file and renamed, so a
+run killed while saving leaves the previous checkpoint intact. The replay buffer is not
+saved (hundreds of MB for little benefit); a resumed run refills it before learning again.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from neuronsmae.trainers.learner import AgentSpec, EnvSpec, QLearner
+
+CHECKPOINT_NAME = "checkpoint.pt"
+"""File name of a run's latest checkpoint inside its run directory."""
+FORMAT = 1
+"""Bumped when the layout changes incompatibly."""
+
+
+@dataclass
+class Counters:
+    """Progress of a run, carried across ``--resume``."""
+
+    episodes: int = 0
+    """Training episodes stored in the buffer."""
+    env_steps: int = 0
+    """Decisions taken in those episodes."""
+    updates: int = 0
+    """Gradient updates."""
+    wall_seconds: float = 0.0
+    """Training wall time over all sessions of the run."""
+    restarts: int = 0
+    """Rollout-worker restarts over all sessions."""
+
+
+def checkpoint_path(path: str | os.PathLike[str]) -> Path:
+    """A checkpoint file from either its own path or its run directory."""
+    p = Path(path)
+    return p / CHECKPOINT_NAME if p.is_dir() else p
+
+
+def save_checkpoint(
+    path: Path,
+    *,
+    config: dict[str, Any],
+    env: EnvSpec,
+    spec: AgentSpec,
+    learner: QLearner,
+    counters: Counters,
+    np_rng: np.random.Generator,
+) -> None:
+    """Write the checkpoint atomically (temporary file, then rename)."""
+    payload = {
+        "format": FORMAT,
+        "config": config,
+        "env": asdict(env),
+        "agent_spec": asdict(spec),
+        "learner": learner.state_dict(),
+        "counters": asdict(counters),
+        "rng": {
+            "torch": torch.get_rng_state(),
+            "numpy": np_rng.bit_generator.state,
+            "python": random.getstate(),
+        },
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read a checkpoint (file or run directory) with ``weights_only=True``."""
+    p = checkpoint_path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no checkpoint at {p}")
+    payload = torch.load(p, map_location="cpu", weights_only=True)
+    if payload.get("format") != FORMAT:
+        raise ValueError(f"{p} has checkpoint format {payload.get('format')}, not {FORMAT}")
+    return payload
+
+
+def restore_rng(rng_state: dict[str, Any], np_rng: np.random.Generator) -> None:
+    """Put the learner process's random generators back where the checkpoint left them."""
+    torch.set_rng_state(rng_state["torch"])
+    np_rng.bit_generator.state = rng_state["numpy"]
+    version, internal, gauss = rng_state["python"]
+    random.setstate((version, tuple(internal), gauss))

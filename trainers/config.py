@@ -1,0 +1,260 @@
+"""Training configuration: one frozen dataclass, built from defaults, a file and overrides.
+
+CleanRL style: every knob is a field with a docstring, so ``neuronsmae-train --help-config``
+can print them. A configuration is built in layers — defaults, then a TOML or JSON file, then
+``--set key=value`` overrides, then the explicit command-line flags — and every layer rejects
+a key the dataclass does not have (:class:`ConfigError` lists the valid ones), so a typo can
+never silently train with a default.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import difflib
+import inspect
+import itertools
+import json
+import os
+import sys
+import types
+import typing
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from neuronsmae.trainers.mixers import ALGORITHMS
+
+LEVELS = ("easy", "middle", "hard")
+"""Opponent bot levels of the cooperative task."""
+ENV_KINDS = ("inprocess", "remote")
+"""``inprocess``: each worker owns an ``Arena``; ``remote``: each owns an ``RM`` client."""
+
+
+class ConfigError(ValueError):
+    """An unknown key, a value of the wrong type, or a value out of range."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything one training run needs; saved next to its checkpoints."""
+
+    # --- experiment --------------------------------------------------------------------
+    alg: str = "vdn"
+    """Algorithm: iql (no mixer), vdn (sum) or qmix (monotonic hypernetwork mixer)."""
+    level: str = "easy"
+    """Opponent bot level: easy, middle or hard."""
+    seed: int = 1
+    """Seeds the networks, exploration, replay sampling and the training episodes."""
+    episodes: int = 6000
+    """Training episodes in total (a resumed run continues until this many)."""
+    max_minutes: float = 0.0
+    """Wall-clock budget of the training in minutes (0: none); the final evaluation follows."""
+    out: str = ""
+    """Run directory; empty means runs/<alg>_<level>_s<seed>."""
+    # --- environment -------------------------------------------------------------------
+    env: str = "inprocess"
+    """inprocess: each worker owns an Arena; remote: each owns an RM client of its server."""
+    base_port: int = 10000
+    """remote: worker i talks to the server on base_port + i."""
+    coef: float = 1.0
+    """Context 'coef': multiplies the damage the bots deal."""
+    # --- sampling ----------------------------------------------------------------------
+    workers: int = 0
+    """Rollout workers (Ray actors); 0 means one per core, less one for the learner."""
+    worker_cpus: float = 0.5
+    """CPUs Ray reserves per worker (fractions let workers share a core with the learner)."""
+    sync: bool = False
+    """Paper's loop: one episode from every worker, then learn; else learn as episodes land."""
+    address: str = ""
+    """Ray cluster to join (ray.init address); empty starts a local Ray."""
+    max_worker_failures: int = 5
+    """Consecutive failures after which a worker is given up instead of restarted."""
+    # --- learning ----------------------------------------------------------------------
+    lr: float = 5e-4
+    """Adam learning rate (paper: 5e-4)."""
+    gamma: float = 0.99
+    """Discount (paper: 0.99)."""
+    eps_start: float = 0.2
+    """Initial exploration ε (paper: 0.2)."""
+    eps_end: float = 0.05
+    """Final exploration ε (paper: 0.05)."""
+    eps_anneal_episodes: int = 2000
+    """Training episodes over which ε falls linearly from eps_start to eps_end."""
+    target_update_interval: int = 5
+    """Gradient updates between hard target-network refreshes (paper: every 5 iterations)."""
+    grad_clip: float = 10.0
+    """Gradient-norm clip (paper: 10)."""
+    agent_hidden: int = 128
+    """GRU width of the shared agent network (paper: 128)."""
+    mixer_embed: int = 32
+    """QMIX mixing-layer width (paper: 32)."""
+    hypernet_hidden: int = 64
+    """QMIX hypernetwork hidden width."""
+    td_lambda: float = 0.0
+    """λ of the TD(λ) targets (0: one-step Q-learning targets)."""
+    double_q: bool = True
+    """Pick the next action with the online network, value it with the target network."""
+    last_action_input: bool = True
+    """Give the agent network its one-hot last action."""
+    agent_id_input: bool = True
+    """Give the agent network its one-hot agent index."""
+    buffer_size: int = 5000
+    """Replay capacity in episodes."""
+    batch_size: int = 32
+    """Episodes per gradient update."""
+    learning_starts: int = 64
+    """Episodes in the buffer before learning begins."""
+    train_every: int = 2
+    """Asynchronous mode: episodes collected between training rounds."""
+    updates_per_round: int = 1
+    """Gradient updates per training round (per iteration in synchronous mode)."""
+    # --- evaluation and records -------------------------------------------------------
+    eval_every: int = 500
+    """Training episodes between greedy evaluations (0 disables them until the end)."""
+    eval_episodes: int = 40
+    """Greedy episodes per evaluation, on held-out seeds."""
+    final_eval_episodes: int = 100
+    """Greedy episodes of the final evaluation at the end of the run."""
+    eval_seed: int = 1_000_000_000
+    """First held-out seed; training episodes use seeds below it."""
+    checkpoint_every: int = 1000
+    """Training episodes between checkpoints (one is always written at the end)."""
+    torch_threads: int = 1
+    """Torch intra-op threads for the learner (workers always use 1)."""
+    progress: bool = True
+    """Show the live tqdm progress bar."""
+
+    def __post_init__(self) -> None:
+        _check_choice("alg", self.alg, sorted(ALGORITHMS))
+        _check_choice("level", self.level, LEVELS)
+        _check_choice("env", self.env, ENV_KINDS)
+        for name in (
+            "episodes",
+            "batch_size",
+            "buffer_size",
+            "train_every",
+            "updates_per_round",
+            "target_update_interval",
+            "agent_hidden",
+            "mixer_embed",
+            "hypernet_hidden",
+            "eval_episodes",
+            "torch_threads",
+        ):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be ≥ 1, got {getattr(self, name)}")
+        if self.workers < 0 or self.worker_cpus <= 0:
+            raise ConfigError("workers must be ≥ 0 and worker_cpus > 0")
+        if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
+            raise ConfigError("eps_start and eps_end must lie in [0, 1]")
+
+    @property
+    def run_dir(self) -> Path:
+        """The run directory, defaulting to runs/<alg>_<level>_s<seed>."""
+        return Path(self.out or f"runs/{self.alg}_{self.level}_s{self.seed}")
+
+    def n_workers(self) -> int:
+        """Worker count: as configured, else one per core less one for the learner."""
+        return self.workers or max(1, (os.cpu_count() or 2) - 1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""
+        return dataclasses.asdict(self)
+
+
+def _check_choice(name: str, value: Any, valid: Iterable[Any]) -> None:
+    valid = list(valid)
+    if value not in valid:
+        raise ConfigError(f"{name}={value!r} is not valid; valid: {', '.join(map(str, valid))}")
+
+
+def field_docs() -> dict[str, str]:
+    """Each field's docstring, read from the source (for ``--help-config``)."""
+    tree = ast.parse(inspect.getsource(TrainConfig))
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    docs: dict[str, str] = {}
+    for node, after in itertools.pairwise(body):
+        if isinstance(node, ast.AnnAssign) and isinstance(after, ast.Expr):
+            docs[node.target.id] = str(after.value.value)  # type: ignore[attr-defined]
+    return docs
+
+
+def _types() -> dict[str, Any]:
+    return typing.get_type_hints(TrainConfig)
+
+
+def _unknown(keys: Iterable[str], where: str) -> None:
+    valid = [f.name for f in dataclasses.fields(TrainConfig)]
+    bad = [k for k in keys if k not in valid]
+    if bad:
+        hints = {k: difflib.get_close_matches(k, valid, n=1) for k in bad}
+        said = ", ".join(
+            f"{k!r}" + (f" (did you mean {h[0]!r}?)" if h else "") for k, h in hints.items()
+        )
+        raise ConfigError(f"unknown config key(s) in {where}: {said}; valid: {', '.join(valid)}")
+
+
+def _coerce(key: str, value: Any) -> Any:
+    """Convert a file or command-line value to the field's type, or raise ConfigError."""
+    kind = _types()[key]
+    if isinstance(kind, types.UnionType):
+        kind = next(a for a in typing.get_args(kind) if a is not type(None))
+    if isinstance(value, str) and kind is not str:
+        text = value.strip().lower()
+        if kind is bool:
+            if text not in ("true", "false", "1", "0", "yes", "no"):
+                raise ConfigError(f"{key} expects a bool (true/false), got {value!r}")
+            return text in ("true", "1", "yes")
+        try:
+            return kind(float(text)) if kind is int and "e" in text else kind(text)
+        except ValueError:
+            raise ConfigError(f"{key} expects {kind.__name__}, got {value!r}") from None
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is int and isinstance(value, float) and value.is_integer():
+        return int(value)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise ConfigError(f"{key} expects {kind.__name__}, got {value!r}")
+    return value
+
+
+def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read a TOML or JSON file of config keys (flat, or under a ``[train]`` table)."""
+    p = Path(path)
+    if p.suffix == ".toml":
+        if sys.version_info < (3, 11):
+            raise ConfigError("TOML config files need Python ≥ 3.11; use a .json file")
+        import tomllib
+
+        data = tomllib.loads(p.read_text())
+    elif p.suffix == ".json":
+        data = json.loads(p.read_text())
+    else:
+        raise ConfigError(f"config file {p} must end in .toml or .json")
+    if isinstance(data.get("train"), dict) and len(data) == 1:
+        data = data["train"]
+    _unknown(data, str(p))
+    return data
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, str]:
+    """``["key=value", ...]`` → ``{key: value}``; values are coerced later."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set expects key=value, got {item!r}")
+        out[key.strip()] = value
+    _unknown(out, "--set")
+    return out
+
+
+def make_config(*layers: Mapping[str, Any], base: TrainConfig | None = None) -> TrainConfig:
+    """Apply the layers in order over ``base`` (fresh defaults if none), checking each key."""
+    values = (base or TrainConfig()).to_dict()
+    for i, layer in enumerate(layers):
+        _unknown(layer, f"layer {i}")
+        values.update({k: _coerce(k, v) for k, v in layer.items()})
+    return TrainConfig(**values)

@@ -1,0 +1,121 @@
+"""Greedy evaluation: outcome statistics, a policy loaded from a checkpoint, and a match.
+
+:func:`evaluate_checkpoint` is what ``neuronsmae-match --blue runs/.../checkpoint.pt`` calls:
+it plays the checkpoint's agents greedily (ε = 0, available actions only) against the bot
+on seeds ``seed, seed+1, ...`` in an in-process arena and returns the win rate.
+:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from neuronsmae.trainers.agent import build_inputs, masked_greedy
+from neuronsmae.trainers.buffer import Episode
+from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint
+from neuronsmae.trainers.config import LEVELS
+from neuronsmae.trainers.learner import AgentSpec
+from neuronsmae.trainers.rollout import Policy, RolloutWorker
+
+
+def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
+    """Win, draw and loss rates and the mean team return of finished episodes."""
+    eps = list(episodes)
+    if not eps:
+        raise ValueError("no episodes to summarise")
+    winners = [e.info.get("winner") for e in eps]
+    n = len(eps)
+    return {
+        "win_rate": sum(w == "blue" for w in winners) / n,
+        "draw_rate": sum(w == "draw" for w in winners) / n,
+        "loss_rate": sum(w == "red" for w in winners) / n,
+        "mean_return": float(np.mean([e.total_reward for e in eps])),
+        "mean_length": float(np.mean([e.length for e in eps])),
+        "eval_episodes": n,
+    }
+
+
+def load_policy(path: str | os.PathLike[str]) -> Policy:
+    """The acting part of a checkpoint (file or run directory): architecture and weights."""
+    payload = load_checkpoint(path)
+    spec = AgentSpec(**payload["agent_spec"])
+    weights = {k: v.numpy() for k, v in payload["learner"]["agent"].items()}
+    return Policy(spec, weights)
+
+
+class GreedyPolicy:
+    """A checkpoint's agents as a controller: call :meth:`reset`, then :meth:`act` each step."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        policy = load_policy(path)
+        self.spec = policy.spec
+        self.agent = policy.spec.build().eval()
+        self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
+        self.hidden: torch.Tensor | None = None
+        self.last: torch.Tensor | None = None
+
+    def reset(self) -> None:
+        """Forget the recurrent state at the start of an episode."""
+        self.hidden, self.last = None, None
+
+    @torch.no_grad()
+    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
+        """Greedy available action of every agent, given their observations and masks."""
+        x = torch.as_tensor(np.asarray(obs, np.float32))
+        n = x.shape[0]
+        if self.hidden is None or self.last is None:
+            self.hidden = self.agent.initial_hidden(n)
+            self.last = torch.full((n,), -1, dtype=torch.int64)
+        inputs = build_inputs(
+            x,
+            self.last,
+            self.spec.n_actions,
+            last_action=self.spec.last_action,
+            agent_id=self.spec.agent_id,
+        )
+        q, self.hidden = self.agent(inputs.unsqueeze(1), self.hidden)
+        self.last = masked_greedy(q[:, 0], torch.as_tensor(np.asarray(avail)) > 0)
+        return [int(a) for a in self.last]
+
+
+def evaluate_checkpoint(
+    path: str | os.PathLike[str],
+    level: str | int,
+    episodes: int,
+    seed: int,
+    *,
+    contexts: Mapping[str, Any] | None = None,
+    env: str = "inprocess",
+    port: int = 7447,
+) -> dict[str, Any]:
+    """Play a checkpoint greedily against the ``level`` bot for ``episodes`` episodes.
+
+    Episode ``k`` is reset with seed ``seed + k``, so two checkpoints evaluated with the same
+    arguments meet exactly the same starts. ``contexts`` adds reset contexts (e.g.
+    ``{"coef": 1.5}``). Returns the rates of :func:`summarize` plus ``level``, ``seed``,
+    ``checkpoint``, the run's ``alg`` and its training ``episodes_trained``.
+    """
+    if isinstance(level, str) and level not in LEVELS:
+        raise ValueError(f"unknown level {level!r}; valid: {', '.join(LEVELS)}, 0, 1, 2")
+    if episodes < 1:
+        raise ValueError(f"episodes must be ≥ 1, got {episodes}")
+    payload = load_checkpoint(path)
+    policy = load_policy(path)
+    worker = RolloutWorker(0, env, seed, port)
+    ctx = {**(contexts or {}), "level": level}
+    try:
+        played = [worker.run_episode(policy, 0, 0.0, seed + k, ctx) for k in range(episodes)]
+    finally:
+        worker.close()
+    return {
+        **summarize(played),
+        "level": level,
+        "seed": seed,
+        "checkpoint": str(checkpoint_path(path)),
+        "alg": payload["config"]["alg"],
+        "episodes_trained": payload["counters"]["episodes"],
+    }

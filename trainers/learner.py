@@ -1,0 +1,225 @@
+"""The one Q-learning core: recurrent agents, a pluggable mixer, double Q, target networks.
+
+IQL, VDN and QMIX differ only in the mixer (:mod:`neuronsmae.trainers.mixers`); everything
+else — the shared GRU agent, double Q-learning with target networks refreshed every
+``target_update_interval`` updates, masked TD loss over padded episodes, gradient clipping —
+is this one class, so the three algorithms are compared on equal terms.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
+from neuronsmae.trainers.buffer import Batch
+from neuronsmae.trainers.mixers import make_mixer
+from torch import nn
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """The sizes the networks need, from ``ArenaAPI.get_env_info``."""
+
+    n_agents: int
+    """Agents controlled by the learner (the blue team)."""
+    n_actions: int
+    """Discrete choices per agent."""
+    obs_dim: int
+    """Length of one agent's observation."""
+    state_dim: int
+    """Length of the global state."""
+    episode_limit: int
+    """Decisions per episode at most."""
+
+    @classmethod
+    def from_env_info(cls, info: dict[str, Any]) -> EnvSpec:
+        """Read the five sizes out of ``get_env_info()`` (shapes may be ints or tuples)."""
+
+        def flat(v: Any) -> int:
+            return int(np.prod(v)) if isinstance(v, list | tuple) else int(v)
+
+        return cls(
+            n_agents=int(info["n_agents"]),
+            n_actions=int(info["n_actions"]),
+            obs_dim=flat(info["obs_shape"]),
+            state_dim=flat(info["state_shape"]),
+            episode_limit=int(info["episode_limit"]),
+        )
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """How the shared agent network is built; workers rebuild it from this alone."""
+
+    input_dim: int
+    """Width of the input (observation + one-hots)."""
+    n_actions: int
+    """Q-values out."""
+    hidden_dim: int
+    """GRU width."""
+    last_action: bool
+    """Feed the one-hot last action."""
+    agent_id: bool
+    """Feed the one-hot agent index."""
+
+    def build(self) -> RNNAgent:
+        """A fresh network with this architecture."""
+        return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim)
+
+
+def agent_spec(env: EnvSpec, hidden_dim: int, last_action: bool, agent_id: bool) -> AgentSpec:
+    """The agent architecture for an environment and the chosen input options."""
+    width = agent_input_dim(
+        env.obs_dim, env.n_actions, env.n_agents, last_action=last_action, agent_id=agent_id
+    )
+    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id)
+
+
+def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:
+    """Q-values of every agent at every step of the batch: ``[B, T+1, n, A]``.
+
+    Agents are folded into the batch (``[B·n, T+1, D]``) so one GRU call covers them all.
+    """
+    inputs = build_inputs(
+        batch.obs,
+        batch.last_actions,
+        spec.n_actions,
+        last_action=spec.last_action,
+        agent_id=spec.agent_id,
+    )
+    b, t1, n, d = inputs.shape
+    flat = inputs.permute(0, 2, 1, 3).reshape(b * n, t1, d)
+    q, _ = agent(flat, agent.initial_hidden(b * n))
+    return q.view(b, n, t1, -1).permute(0, 2, 1, 3)
+
+
+def lambda_returns(
+    rewards: torch.Tensor,
+    terminated: torch.Tensor,
+    next_values: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> torch.Tensor:
+    """TD(λ) targets ``G_t = r_t + γ(1−d_t)[(1−λ) V_{t+1} + λ G_{t+1}]``, all ``[B, T, k]``.
+
+    ``next_values[:, t]`` is the target network's value of the state after step ``t``. With
+    λ = 0 this is the one-step target. λ > 0 carries the +20 of a win back over many steps
+    per update instead of one, which matters when the budget is a few thousand episodes.
+    Padding needs no special case: the last real step has ``d = 1`` and cuts the recursion,
+    and the padded steps after it are masked out of the loss.
+    """
+    one_step = rewards + gamma * (1.0 - terminated) * next_values
+    if lam <= 0.0:
+        return one_step
+    out = torch.empty_like(one_step)
+    carry = next_values[:, -1]
+    for t in range(rewards.shape[1] - 1, -1, -1):
+        blend = (1.0 - lam) * next_values[:, t] + lam * carry
+        carry = rewards[:, t] + gamma * (1.0 - terminated[:, t]) * blend
+        out[:, t] = carry
+    return out
+
+
+class QLearner:
+    """Trains the shared agent and the mixer from batches of padded episodes."""
+
+    def __init__(
+        self,
+        env: EnvSpec,
+        spec: AgentSpec,
+        mixer: str,
+        *,
+        lr: float,
+        gamma: float,
+        grad_clip: float,
+        target_update_interval: int,
+        double_q: bool,
+        mixer_embed: int,
+        hypernet_hidden: int,
+        td_lambda: float = 0.0,
+    ) -> None:
+        self.env, self.spec, self.mixer_name = env, spec, mixer
+        self.td_lambda = td_lambda
+        self.gamma, self.grad_clip, self.double_q = gamma, grad_clip, double_q
+        self.target_update_interval = target_update_interval
+        self.agent = spec.build()
+        self.mixer = make_mixer(mixer, env.n_agents, env.state_dim, mixer_embed, hypernet_hidden)
+        self.target_agent = copy.deepcopy(self.agent)
+        self.target_mixer = copy.deepcopy(self.mixer)
+        self.params = [*self.agent.parameters(), *self.mixer.parameters()]
+        self.optimizer = torch.optim.Adam(self.params, lr=lr)
+        self.updates = 0
+
+    def train(self, batch: Batch) -> dict[str, float]:
+        """One gradient step on the masked TD loss; refresh the targets when due."""
+        q_all = sequence_q(self.agent, self.spec, batch)  # [B, T+1, n, A]
+        chosen = q_all[:, :-1].gather(-1, batch.actions.unsqueeze(-1)).squeeze(-1)  # [B, T, n]
+        with torch.no_grad():
+            target_all = sequence_q(self.target_agent, self.spec, batch)[:, 1:]  # [B, T, n, A]
+            avail_next = batch.avail[:, 1:]
+            if self.double_q:
+                best = masked_greedy(q_all[:, 1:].detach(), avail_next)
+                target_max = target_all.gather(-1, best.unsqueeze(-1)).squeeze(-1)
+            else:
+                target_max = target_all.masked_fill(~avail_next, float("-inf")).max(-1).values
+            target_max = torch.nan_to_num(target_max, neginf=0.0) * batch.alive[:, 1:]
+            target_tot = self.target_mixer(target_max, batch.state[:, 1:])  # [B, T, 1 or n]
+            targets = lambda_returns(
+                batch.rewards.unsqueeze(-1),
+                batch.terminated.unsqueeze(-1),
+                target_tot,
+                self.gamma,
+                self.td_lambda,
+            )
+        q_tot = self.mixer(chosen * batch.alive[:, :-1], batch.state[:, :-1])
+        mask = batch.filled.unsqueeze(-1).expand_as(q_tot)
+        if not self.mixer.team_output:  # IQL: a destroyed robot has no TD error of its own
+            mask = mask * batch.alive[:, :-1]
+        td = (q_tot - targets) * mask
+        loss = (td**2).sum() / mask.sum().clamp(min=1.0)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
+        self.optimizer.step()
+        self.updates += 1
+        if self.updates % self.target_update_interval == 0:
+            self.update_targets()
+        return {
+            "loss": float(loss.detach()),
+            "grad_norm": float(grad_norm),
+            "q_taken": float((q_tot.detach() * mask).sum() / mask.sum().clamp(min=1.0)),
+            "target": float((targets * mask).sum() / mask.sum().clamp(min=1.0)),
+        }
+
+    def update_targets(self) -> None:
+        """Copy the online networks into the target networks (hard update)."""
+        self.target_agent.load_state_dict(self.agent.state_dict())
+        self.target_mixer.load_state_dict(self.mixer.state_dict())
+
+    def acting_weights(self) -> dict[str, np.ndarray]:
+        """The agent's weights as NumPy arrays: what workers need, cheap to ship by Ray."""
+        return {k: v.detach().cpu().numpy().copy() for k, v in self.agent.state_dict().items()}
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume learning exactly (networks, targets, optimiser)."""
+        return {
+            "agent": self.agent.state_dict(),
+            "mixer": self.mixer.state_dict(),
+            "target_agent": self.target_agent.state_dict(),
+            "target_mixer": self.target_mixer.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`state_dict` saved."""
+        self.agent.load_state_dict(state["agent"])
+        self.mixer.load_state_dict(state["mixer"])
+        self.target_agent.load_state_dict(state["target_agent"])
+        self.target_mixer.load_state_dict(state["target_mixer"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.updates = int(state["updates"])

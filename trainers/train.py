@@ -1,0 +1,281 @@
+"""The training loop: sample episodes with Ray workers, learn, evaluate, record, checkpoint.
+
+Two loops share everything but the order of sampling and learning:
+
+* asynchronous (default): ``pipeline`` requests per worker stay queued; whenever episodes
+  land they go to the buffer, and every ``train_every`` episodes the learner runs
+  ``updates_per_round`` updates and broadcasts the new weights. Nobody waits for the
+  slowest worker.
+* synchronous (``sync=True``, the paper's loop): each iteration asks every worker for one
+  episode, waits for all, then learns.
+
+Training episode ``k`` is reset with a seed derived from the run seed and ``k`` that is
+always below ``eval_seed``; evaluation uses ``eval_seed, eval_seed+1, ...``, so the greedy
+win rate is measured on starts the agents never trained on.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import random
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+import ray
+import torch
+from neuronsmae.trainers.agent import epsilon_at
+from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
+from neuronsmae.trainers.checkpoint import (
+    CHECKPOINT_NAME,
+    Counters,
+    load_checkpoint,
+    restore_rng,
+    save_checkpoint,
+)
+from neuronsmae.trainers.config import TrainConfig
+from neuronsmae.trainers.evaluate import summarize
+from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
+from neuronsmae.trainers.mixers import mixer_for_algorithm
+from neuronsmae.trainers.records import Recorder
+from neuronsmae.trainers.rollout import Policy
+from neuronsmae.trainers.sampler import Request, Sampler
+
+log = logging.getLogger(__name__)
+
+Hook = Callable[["Trainer"], None]
+"""Called after every batch of landed episodes (tests use it to inject faults)."""
+
+
+def train_seed(run_seed: int, k: int, eval_seed: int) -> int:
+    """Reset seed of training episode ``k``: deterministic and always below ``eval_seed``."""
+    return (run_seed * 1_000_003 + k) % eval_seed
+
+
+class Trainer:
+    """One training run: owns the sampler, learner, buffer, records and counters."""
+
+    def __init__(self, cfg: TrainConfig, *, resume: bool = False, hook: Hook | None = None) -> None:
+        self.cfg, self.hook = cfg, hook
+        self.run_dir = cfg.run_dir
+        self.counters = Counters()
+        self.np_rng = np.random.default_rng(cfg.seed)
+        random.seed(cfg.seed)
+        torch.manual_seed(cfg.seed)
+        torch.set_num_threads(cfg.torch_threads)
+        self.owns_ray = not ray.is_initialized()
+        if self.owns_ray:
+            ray.init(
+                address=cfg.address or None,
+                include_dashboard=False,
+                logging_level=logging.WARNING,
+                log_to_driver=False,
+            )
+        try:
+            self._build(cfg)
+            if resume:
+                self._resume()
+        except BaseException:
+            self.close()
+            raise
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+        self.recent: deque[Episode] = deque(maxlen=100)
+        self.last_stats: dict[str, float] = {}
+        self.evals: list[dict[str, Any]] = []
+        self.stored_seeds: list[int] = []
+
+    def _build(self, cfg: TrainConfig) -> None:
+        """Start the workers, then size the networks and the buffer from their env."""
+        self.sampler = Sampler(
+            cfg.n_workers(),
+            env_kind=cfg.env,
+            base_seed=cfg.seed * 1000,
+            base_port=cfg.base_port,
+            contexts={"level": cfg.level, "coef": cfg.coef},
+            worker_cpus=cfg.worker_cpus,
+            max_failures=cfg.max_worker_failures,
+        )
+        self.env = EnvSpec.from_env_info(self.sampler.env_info())
+        self.spec = agent_spec(
+            self.env, cfg.agent_hidden, cfg.last_action_input, cfg.agent_id_input
+        )
+        self.learner = QLearner(
+            self.env,
+            self.spec,
+            mixer_for_algorithm(cfg.alg),
+            lr=cfg.lr,
+            gamma=cfg.gamma,
+            grad_clip=cfg.grad_clip,
+            target_update_interval=cfg.target_update_interval,
+            double_q=cfg.double_q,
+            mixer_embed=cfg.mixer_embed,
+            hypernet_hidden=cfg.hypernet_hidden,
+            td_lambda=cfg.td_lambda,
+        )
+        self.buffer = EpisodeReplayBuffer(
+            cfg.buffer_size,
+            self.env.n_agents,
+            self.env.obs_dim,
+            self.env.state_dim,
+            self.env.n_actions,
+            self.env.episode_limit,
+        )
+
+    def _resume(self) -> None:
+        payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
+        self.learner.load_state_dict(payload["learner"])
+        self.counters = Counters(**payload["counters"])
+        restore_rng(payload["rng"], self.np_rng)
+        log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
+
+    def close(self) -> None:
+        """Stop the workers, and Ray too if this trainer started it."""
+        if getattr(self, "sampler", None) is not None:
+            self.sampler.close()
+        if self.owns_ray and ray.is_initialized():
+            ray.shutdown()
+
+    # --- the loop ----------------------------------------------------------------------
+    def run(self) -> dict[str, Any]:
+        """Train until ``cfg.episodes``, then evaluate greedily; return the final figures."""
+        cfg = self.cfg
+        self.recorder = Recorder(self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress)
+        self.session_start = time.perf_counter()
+        self.session_steps = 0
+        self.wall_base = self.counters.wall_seconds
+        self.sampler.broadcast(self._policy())
+        try:
+            if cfg.sync:
+                self._run_sync()
+            else:
+                self._run_async()
+            final = self.evaluate(self.cfg.final_eval_episodes)
+            self.checkpoint()
+        finally:
+            self.recorder.close()
+            self.close()
+        return {
+            "final": final,
+            "evals": self.evals,
+            "counters": asdict(self.counters),
+            "run_dir": str(self.run_dir),
+        }
+
+    def _more(self) -> bool:
+        """Episodes left to play and wall-clock budget left."""
+        c, limit = self.counters, self.cfg.max_minutes * 60.0
+        wall = self.wall_base + time.perf_counter() - self.session_start
+        return c.episodes < self.cfg.episodes and (limit <= 0 or wall < limit)
+
+    def _run_async(self) -> None:
+        issued = self.counters.episodes
+        while self._more():
+            while self.sampler.idle_slots() > 0 and issued < self.cfg.episodes:
+                self.sampler.submit(self._request(issued))
+                issued += 1
+            self._absorb(self.sampler.wait())
+
+    def _run_sync(self) -> None:
+        while self._more():
+            k = self.counters.episodes
+            n = min(self.sampler.n_live, self.cfg.episodes - k)
+            self._absorb(self.sampler.run([self._request(k + j) for j in range(n)]))
+
+    def _request(self, k: int) -> Request:
+        cfg = self.cfg
+        eps = epsilon_at(k, cfg.eps_start, cfg.eps_end, cfg.eps_anneal_episodes)
+        return Request(train_seed(cfg.seed, k, cfg.eval_seed), eps)
+
+    def _absorb(self, episodes: list[Episode]) -> None:
+        """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
+        cfg, c = self.cfg, self.counters
+        before = c.episodes
+        for episode in episodes:
+            self.buffer.add(episode)
+            self.stored_seeds.append(episode.info["seed"])
+            self.recent.append(episode)
+            c.episodes += 1
+            c.env_steps += episode.length
+            self.session_steps += episode.length
+        c.restarts += self.sampler.restarts - getattr(self, "_seen_restarts", 0)
+        self._seen_restarts = self.sampler.restarts
+        c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
+        rounds = self._rounds_due(before, c.episodes)
+        if rounds and len(self.buffer) >= cfg.learning_starts:
+            for _ in range(rounds * cfg.updates_per_round):
+                self.last_stats = self.learner.train(
+                    self.buffer.sample(cfg.batch_size, self.np_rng)
+                )
+            c.updates = self.learner.updates
+            self.sampler.broadcast(self._policy())
+        self.recorder.advance(c.episodes - before)
+        if rounds:
+            self.recorder.train(self._train_row())
+        if (
+            cfg.eval_every
+            and c.episodes // cfg.eval_every > before // cfg.eval_every
+            and c.episodes < cfg.episodes
+        ):
+            self.evaluate()
+        if c.episodes // cfg.checkpoint_every > before // cfg.checkpoint_every:
+            self.checkpoint()
+        if self.hook is not None:
+            self.hook(self)
+
+    def _rounds_due(self, before: int, after: int) -> int:
+        if self.cfg.sync:
+            return 1
+        every = self.cfg.train_every
+        return after // every - before // every
+
+    # --- records -----------------------------------------------------------------------
+    def _policy(self) -> Policy:
+        return Policy(self.spec, self.learner.acting_weights())
+
+    def _train_row(self) -> dict[str, Any]:
+        c, recent = self.counters, list(self.recent)
+        elapsed = max(time.perf_counter() - self.session_start, 1e-9)
+        return {
+            **asdict(c),
+            "epsilon": epsilon_at(
+                c.episodes, self.cfg.eps_start, self.cfg.eps_end, self.cfg.eps_anneal_episodes
+            ),
+            "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
+            "train_return": summarize(recent)["mean_return"] if recent else 0.0,
+            "env_steps_per_s": self.session_steps / elapsed,
+            **self.last_stats,
+        }
+
+    def evaluate(self, episodes: int | None = None) -> dict[str, Any]:
+        """Greedy win rate on the held-out seeds; recorded and returned."""
+        cfg, c = self.cfg, self.counters
+        n = episodes or cfg.eval_episodes
+        requests = [Request(cfg.eval_seed + k, 0.0, "eval") for k in range(n)]
+        figures = summarize(self.sampler.run(requests))
+        c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
+        row = {**asdict(c), **figures}
+        self.recorder.eval(row)
+        self.evals.append(row)
+        return row
+
+    def checkpoint(self) -> None:
+        """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``."""
+        save_checkpoint(
+            self.run_dir / CHECKPOINT_NAME,
+            config=self.cfg.to_dict(),
+            env=self.env,
+            spec=self.spec,
+            learner=self.learner,
+            counters=self.counters,
+            np_rng=self.np_rng,
+        )
+
+
+def train(cfg: TrainConfig, *, resume: bool = False, hook: Hook | None = None) -> dict[str, Any]:
+    """Run one training to completion and return its final greedy evaluation and history."""
+    return Trainer(cfg, resume=resume, hook=hook).run()
