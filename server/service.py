@@ -52,6 +52,8 @@ log = logging.getLogger("neuronsmae.server")
 PHYSICS_DT = 0.02
 """Simulated seconds per physics step; a decision lasts ``decision_steps`` of them."""
 DEFAULT_LEASE_S = 60.0
+WARM_UP_OPTIONS: dict[str, Any] = {"lidar": True, "observability": "partial"}
+"""Options whose first decision compiles nearly every kernel of the simulation."""
 
 
 class Pacer:
@@ -90,6 +92,27 @@ class _Built:
     options_key: bytes
     session: str | None = None
     used: bool = False
+
+
+def warm_up(factory: Callable[..., ArenaAPI], seed: int = 0) -> None:
+    """Play one decision on a throwaway arena with the costliest options.
+
+    The simulation's numba kernels compile on first use (tens of seconds with a cold
+    cache): paying that before serving keeps a client's first ``step`` within its timeout.
+    A throwaway arena, so the served one stays exactly as freshly built.
+    """
+    try:
+        arena = factory(seed=seed, **WARM_UP_OPTIONS)
+    except NeuronsMAEError as exc:  # an arena without these options: nothing to warm
+        log.info("warm-up skipped: %s", exc)
+        return
+    try:
+        arena.reset()
+        arena.step([0] * arena.get_env_info()["n_agents"])
+    except Exception:  # report, but let clients see the failure on their own requests
+        log.exception("warm-up episode failed")
+    finally:
+        arena.close()
 
 
 def _options_key(options: dict[str, Any]) -> bytes:
@@ -136,7 +159,8 @@ class ArenaService:
     # ---- lifecycle ---------------------------------------------------------------------
 
     def __enter__(self) -> ArenaService:
-        """Build the default arena now, so imports and JIT compiles happen before serving."""
+        """Warm up, then build the default arena, all before the first request is served."""
+        warm_up(self._factory, self._default_seed)
         self._build(self._default_seed, {})
         return self
 

@@ -90,7 +90,7 @@ def evaluate_checkpoint(
     *,
     contexts: Mapping[str, Any] | None = None,
     env: str = "inprocess",
-    port: int = 7447,
+    port: int = 10000,
 ) -> dict[str, Any]:
     """Play a checkpoint greedily against the ``level`` bot for ``episodes`` episodes.
 

@@ -41,7 +41,7 @@ ROBOT_SLOPE = 56.0
 """Further extra cost growing linearly towards the other robot's centre."""
 N_LANDMARKS = 8
 """ALT landmarks; more tighten the heuristic but cost a lookup each per push."""
-ACTIVE_LANDMARKS = 2
+ACTIVE_LANDMARKS = 8
 """Landmarks used per query: those giving the best bound at the start."""
 TIE_BREAK = 1.0 + 1e-3
 """Heuristic weight just above 1: among equal-f nodes prefer the one nearer the goal."""

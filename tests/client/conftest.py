@@ -18,6 +18,8 @@ from neuronsmae.client import ping
 from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
 from neuronsmae.protocol.transport import client_config
+from neuronsmae.server.arena import Arena
+from neuronsmae.server.service import warm_up
 
 STARTUP_TIMEOUT = 120.0
 
@@ -73,6 +75,7 @@ class Server:
 @pytest.fixture(scope="module")
 def start_server() -> Iterator[Callable[..., Server]]:
     """Start servers (ready when returned); all of them stop when the module ends."""
+    warm_up(Arena)  # compile the numba kernels once, here, not in every server at once
     started: list[Server] = []
 
     def start(*args: str, port: int | None = None) -> Server:

@@ -1,0 +1,124 @@
+"""Action spaces: decoding, masks, bad-action errors, and the abstract planner end to end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from neuronsmae.protocol.errors import InvalidActionError
+from neuronsmae.server import Arena
+
+OPEN = np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (7.4, 3.9, np.pi), (7.5, 0.6, np.pi)])
+
+
+@pytest.mark.parametrize(
+    ("space", "actions", "needle"),
+    [
+        ("abstract", [0], "expected 2 actions"),
+        ("abstract", [0, 8], r"agent 1.*\[0, 7\]"),
+        ("abstract", [0, -1], "agent 1"),
+        ("abstract", [0, "3"], "agent 1: action must be an integer"),
+        ("abstract", [0, 1.5], "agent 1"),
+        ("abstract", "01", "sequence"),
+        ("discrete", [10, 0], r"agent 0.*\[0, 9\]"),
+        ("continuous", [[0, 0, 0, 0], [0, 0, 0]], r"agent 1.*shape \(4,\)"),
+        ("continuous", [[0, 0, 0, 0], [2.5, 0, 0, 0]], r"agent 1: vx=2.5 is outside \[-2.0, 2.0\]"),
+        ("continuous", [[0, 0, 1.8, 0], [0, 0, 0, 0]], r"agent 0: omega=1.8.*1.75"),
+        ("continuous", [[0, np.nan, 0, 0], [0, 0, 0, 0]], "agent 0: action has NaN"),
+        ("continuous", [[0, 0, 0, np.inf], [0, 0, 0, 0]], "agent 0: action has NaN or infinite"),
+        ("continuous", [[0, 0, 0, 2], [0, 0, 0, 0]], r"agent 0: target=2.0.*\[0, 1\]"),
+        ("continuous", [[0, 0, 0, 0.5], [0, 0, 0, 0]], "target"),
+        ("continuous", [["a", 0, 0, 0], [0, 0, 0, 0]], "agent 0"),
+    ],
+)
+def test_bad_actions_raise_naming_agent_and_bound(space: str, actions, needle: str) -> None:
+    a = Arena(seed=1, action_space=space)
+    a.reset()
+    before = a.get_obs()
+    with pytest.raises(InvalidActionError, match=needle) as err:
+        a.step(actions)
+    assert isinstance(err.value, ValueError)
+    # A rejected action never advances or corrupts the episode.
+    assert a.t == 0
+    np.testing.assert_array_equal(np.stack(a.get_obs()), np.stack(before))
+    a.close()
+
+
+def test_clip_option_clips_instead() -> None:
+    a = Arena(seed=1, action_space="continuous", clip_actions=True)
+    a.reset()
+    a.step([[9.0, -9.0, 5.0, 3], [0, 0, 0, 0]])
+    assert a.cmd.shape == (4, 3)
+    a.close()
+
+
+def test_masks_for_dead_robots_and_dead_enemies() -> None:
+    a = Arena(seed=1, action_space="abstract", mode="competitive")
+    a.reset()
+    a.place(OPEN)
+    a.referee.alive[1] = False  # blue_1 destroyed
+    a.referee.alive[3] = False  # red_1 destroyed
+    m = a.get_avail_actions()
+    assert m[1].tolist() == [1, 0, 0, 0, 0, 0, 0, 0]  # only the no-op
+    assert m[0][:4].any() and not m[0][4:].any()  # cannot target red_1
+    assert m[2][:4].any() and not m[2][4:].any()  # red_0 cannot target dead blue_1
+    for mask in m:
+        assert mask.dtype == np.int8
+    a.close()
+
+
+def test_discrete_moves_in_body_frame() -> None:
+    a = Arena(seed=1, action_space="discrete", mode="competitive")
+    a.reset()
+    # blue_0 faces +y: "right" (move 4) goes to +x; it targets red_0 straight ahead.
+    a.place(np.array([(2.5, 1.0, np.pi / 2), (0.6, 3.9, 0.0), (2.5, 3.0, -np.pi / 2),
+                      (7.5, 0.6, np.pi)]), bullets=[0, 0, 0, 0])
+    for _ in range(8):
+        a.step([4, 0, 0, 0])
+    assert a.poses[0, 0] > 2.5 + 0.5
+    assert abs(a.poses[0, 1] - 1.0) < 0.15
+    a.close()
+
+
+def test_discrete_released_period_is_five_steps() -> None:
+    a = Arena(seed=1, action_space="discrete")
+    a.reset()
+    _, _, _, info = a.step([0, 0])
+    assert info["t"] == 5 and a.get_env_info()["episode_limit"] == 200
+    a.close()
+
+
+def test_auto_turn_faces_the_target() -> None:
+    a = Arena(seed=1, action_space="discrete", mode="competitive")
+    a.reset()
+    a.place(np.array([(3.0, 1.9, 0.0), (0.6, 3.9, 0.0), (3.0, 3.2, 0.0), (7.5, 0.6, np.pi)]),
+            bullets=[0, 0, 0, 0])
+    for _ in range(6):  # 0.6 s of "stop" aimed at red_0 straight above
+        a.step([0, 0, 0, 0])
+    assert a.poses[0, 2] == pytest.approx(np.pi / 2, abs=0.1)
+    a.close()
+
+
+def test_abstract_action_drives_to_chosen_candidate_point() -> None:
+    a = Arena(seed=1, action_space="abstract", mode="competitive")
+    a.reset()
+    a.place(np.array([(1.0, 1.0, 0.0), (0.6, 3.9, 0.0), (5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]),
+            bullets=[0, 0, 0, 0])
+    goal = a.cands[0, 0, 2].copy()  # blue_0's third point around red_0
+    for _ in range(12):
+        a.step([2, 0, 0, 0])
+        a.place(np.concatenate([a.poses[:2], [(5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]]),
+                bullets=[0, 0, 0, 0])  # hold red still so the point stays put
+        if np.hypot(*(a.poses[0, :2] - goal)) < 0.2:
+            break
+    assert np.hypot(*(a.poses[0, :2] - goal)) < 0.2
+    a.close()
+
+
+def test_candidate_points_in_obs_are_deterministic() -> None:
+    a, b = Arena(seed=5), Arena(seed=5)
+    oa, ob = a.reset(), b.reset()
+    np.testing.assert_array_equal(oa[0][12:28], ob[0][12:28])
+    assert np.abs(oa[0][12:28]).max() <= 1.0
+    a.close()
+    b.close()
