@@ -46,4 +46,8 @@ def client_config(host: str, port: int) -> zenoh.Config:
     conf = _base_config("client")
     conf.insert_json5("connect/endpoints", json.dumps([endpoint(host, port)]))
     conf.insert_json5("listen/endpoints", "[]")
+    # Retry a lost server every 0.25 s at first and at least every second (Zenoh's default
+    # backs off to 4 s), so a restarted server is found again soon after it listens.
+    retry = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
+    conf.insert_json5("connect/retry", json.dumps(retry))
     return conf
