@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from neuronsmae.trainers.features import FEATURES
 from neuronsmae.trainers.mixers import ALGORITHMS
 
 LEVELS = ("easy", "middle", "hard")
@@ -96,6 +97,8 @@ class TrainConfig:
     """λ of the TD(λ) targets (0: one-step Q-learning targets)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
+    features: str = "raw"
+    """Agent inputs: raw (the observation as given) or relative (plus derived geometry)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
@@ -130,6 +133,7 @@ class TrainConfig:
         _check_choice("alg", self.alg, sorted(ALGORITHMS))
         _check_choice("level", self.level, LEVELS)
         _check_choice("env", self.env, ENV_KINDS)
+        _check_choice("features", self.features, sorted(FEATURES))
         for name in (
             "episodes",
             "batch_size",

@@ -18,6 +18,7 @@ from neuronsmae.trainers.agent import build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint
 from neuronsmae.trainers.config import LEVELS
+from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 
@@ -53,6 +54,7 @@ class GreedyPolicy:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         policy = load_policy(path)
         self.spec = policy.spec
+        self.featurize = get_features(policy.spec.features)
         self.agent = policy.spec.build().eval()
         self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
         self.hidden: torch.Tensor | None = None
@@ -65,7 +67,7 @@ class GreedyPolicy:
     @torch.no_grad()
     def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
         """Greedy available action of every agent, given their observations and masks."""
-        x = torch.as_tensor(np.asarray(obs, np.float32))
+        x = torch.as_tensor(self.featurize(np.asarray(obs, np.float32)))
         n = x.shape[0]
         if self.hidden is None or self.last is None:
             self.hidden = self.agent.initial_hidden(n)

@@ -57,15 +57,19 @@ def relative(obs: np.ndarray) -> np.ndarray:
     for j in range(N_ENEMY):
         enemy, enemy_yaw = _xy(obs, 6 + 3 * j), obs[..., 8 + 3 * j] * np.pi
         to_enemy = enemy - me
-        out += [np.linalg.norm(to_enemy, axis=-1) / SCALE,
-                np.linalg.norm(enemy - ally, axis=-1) / SCALE]
+        out += [
+            np.linalg.norm(to_enemy, axis=-1) / SCALE,
+            np.linalg.norm(enemy - ally, axis=-1) / SCALE,
+        ]
         out += _angle_feats(np.arctan2(to_enemy[..., 1], to_enemy[..., 0]) - my_yaw)
         from_enemy = me - enemy  # where I stand as seen from the enemy's heading
         out += _angle_feats(np.arctan2(from_enemy[..., 1], from_enemy[..., 0]) - enemy_yaw)
         for k in range(K):
             point = _xy(obs, 12 + 2 * (K * j + k))
-            out += [np.linalg.norm(point - me, axis=-1) / SCALE,
-                    np.linalg.norm(point - ally, axis=-1) / SCALE]
+            out += [
+                np.linalg.norm(point - me, axis=-1) / SCALE,
+                np.linalg.norm(point - ally, axis=-1) / SCALE,
+            ]
             side = point - enemy
             out += [np.cos(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)]
             out += [np.sin(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)]

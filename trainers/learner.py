@@ -65,18 +65,25 @@ class AgentSpec:
     """Feed the one-hot last action."""
     agent_id: bool
     """Feed the one-hot agent index."""
+    features: str = "raw"
+    """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
 
     def build(self) -> RNNAgent:
         """A fresh network with this architecture."""
         return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim)
 
 
-def agent_spec(env: EnvSpec, hidden_dim: int, last_action: bool, agent_id: bool) -> AgentSpec:
-    """The agent architecture for an environment and the chosen input options."""
+def agent_spec(
+    env: EnvSpec, hidden_dim: int, last_action: bool, agent_id: bool, features: str = "raw"
+) -> AgentSpec:
+    """The agent architecture for an environment and the chosen input options.
+
+    ``env.obs_dim`` is the width *after* the feature set (what the buffer stores).
+    """
     width = agent_input_dim(
         env.obs_dim, env.n_actions, env.n_agents, last_action=last_action, agent_id=agent_id
     )
-    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id)
+    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features)
 
 
 def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:

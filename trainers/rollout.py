@@ -19,6 +19,7 @@ import torch
 from neuronsmae.protocol import ArenaAPI
 from neuronsmae.trainers.agent import build_inputs, epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
+from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
 
 DEFAULT_ENV_OPTIONS: Mapping[str, Any] = {
@@ -122,9 +123,10 @@ class RolloutWorker:
         """
         self.set_policy(policy, version)
         spec = policy.spec
+        featurize = get_features(spec.features)
         start = time.perf_counter()
         env, n = self.env, self.n_agents
-        obs = [np.asarray(env.reset(contexts=dict(contexts), seed=seed), np.float32)]
+        obs = [featurize(np.asarray(env.reset(contexts=dict(contexts), seed=seed), np.float32))]
         states = [np.asarray(env.get_state(), np.float32)]
         avails = [np.asarray(env.get_avail_actions(), np.int8)]
         alive = [np.ones(n, dtype=bool)]
@@ -146,7 +148,7 @@ class RolloutWorker:
             next_obs, reward, done, info = env.step([int(a) for a in act])
             actions.append(act.numpy())
             rewards.append(float(np.mean(reward)))
-            obs.append(np.asarray(next_obs, np.float32))
+            obs.append(featurize(np.asarray(next_obs, np.float32)))
             states.append(np.asarray(env.get_state(), np.float32))
             avails.append(np.asarray(env.get_avail_actions(), np.int8))
             alive.append(blue_alive(info, n))

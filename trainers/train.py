@@ -22,7 +22,7 @@ import random
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,7 @@ from neuronsmae.trainers.checkpoint import (
 )
 from neuronsmae.trainers.config import TrainConfig
 from neuronsmae.trainers.evaluate import summarize
+from neuronsmae.trainers.features import feature_dim
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.records import Recorder
@@ -100,9 +101,10 @@ class Trainer:
             worker_cpus=cfg.worker_cpus,
             max_failures=cfg.max_worker_failures,
         )
-        self.env = EnvSpec.from_env_info(self.sampler.env_info())
+        raw = EnvSpec.from_env_info(self.sampler.env_info())
+        self.env = replace(raw, obs_dim=feature_dim(cfg.features, raw.obs_dim))
         self.spec = agent_spec(
-            self.env, cfg.agent_hidden, cfg.last_action_input, cfg.agent_id_input
+            self.env, cfg.agent_hidden, cfg.last_action_input, cfg.agent_id_input, cfg.features
         )
         self.learner = QLearner(
             self.env,

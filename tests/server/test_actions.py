@@ -93,7 +93,7 @@ def test_auto_turn_faces_the_target() -> None:
     a.reset()
     a.place(np.array([(3.0, 1.9, 0.0), (0.6, 3.9, 0.0), (3.0, 3.2, 0.0), (7.5, 0.6, np.pi)]),
             bullets=[0, 0, 0, 0])
-    for _ in range(25):  # 2.5 s of "stop" aimed at red_0 straight above
+    for _ in range(40):  # 4 s of "stop" aimed at red_0 straight above (ω = heading error)
         a.step([0, 0, 0, 0])
     assert a.poses[0, 2] == pytest.approx(np.pi / 2, abs=0.1)
     a.close()

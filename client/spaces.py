@@ -1,0 +1,188 @@
+"""What the Gymnasium and PettingZoo faces share: the arena's layout as spaces, and conversions.
+
+Both faces (:mod:`neuronsmae.client.gym_env`, :mod:`neuronsmae.client.pz_env`) wrap any
+:class:`~neuronsmae.protocol.interface.ArenaAPI` — the in-process ``Arena`` or the remote
+``RM`` — and must agree on how an arena's options become spaces, how a policy's action
+becomes the arena's action, where masks live and when an episode is terminated rather than
+truncated. Keeping those rules here means the two faces cannot drift apart.
+
+Conventions (both faces):
+
+* Observations are the arena's float32 vectors, every value in [-1, 1].
+* Abstract and discrete actions are ``Discrete(n_actions)`` per agent; the availability mask
+  over those choices is called ``"action_mask"`` (int8, 1 = allowed), the name every
+  Gymnasium/PettingZoo tool passes to ``space.sample(mask=...)``.
+* Continuous actions are ``Box(4)`` per agent: ``(vx, vy, omega, target)`` with
+  ``vx, vy ∈ [-2, 2]`` m/s, ``omega ∈ [-1.75, 1.75]`` rad/s and ``target ∈ [0, n_enemies]``
+  read as a bin: enemy ``i`` is any value in ``[i, i + 1)`` (the upper edge ``n_enemies``
+  counts as the last enemy). Equal-width bins let an unsquashed Gaussian or a tanh-scaled
+  policy pick every enemy equally easily; an exact integer ``i`` still means enemy ``i``.
+  Its mask covers the target only, so it is called ``"target_mask"``: a mask named
+  ``"action_mask"`` would make the standard tools call ``Box.sample(mask=...)``, which fails.
+* An episode that ends with a team wiped out is *terminated*; one that ends at the time
+  limit with both teams standing is *truncated*.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
+from neuronsmae.protocol.interface import ArenaAPI
+
+PHYSICS_HZ = 50
+"""Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
+MOTION_LOW = np.array([-2.0, -2.0, -1.75], dtype=np.float32)
+MOTION_HIGH = np.array([2.0, 2.0, 1.75], dtype=np.float32)
+"""Bounds of (vx, vy, omega) of a continuous action, as the arena validates them."""
+ACTION_MASK = "action_mask"
+TARGET_MASK = "target_mask"
+
+ArenaSource = ArenaAPI | Callable[[], ArenaAPI] | None
+"""What a face wraps: an arena, a zero-argument factory of one, or None for a remote ``RM``."""
+
+
+def open_arena(env: ArenaSource, rm_kwargs: Mapping[str, Any]) -> ArenaAPI:
+    """The arena a face will own: ``env`` itself, ``env()``, or ``RM(**rm_kwargs)``.
+
+    The remote client is imported only here and only when asked for, so wrapping an
+    in-process arena never touches Zenoh. Options are refused alongside a ready arena because
+    they could not apply to it, and silently ignoring them would hide a misconfiguration.
+    """
+    if env is None:
+        from neuronsmae.client.rm import RM
+
+        return RM(**rm_kwargs)
+    if rm_kwargs:
+        raise TypeError(
+            f"options {sorted(rm_kwargs)} only configure the remote arena built when env is "
+            "None; pass them to the arena (or factory) you give as env instead"
+        )
+    arena = env if isinstance(env, ArenaAPI) else env()
+    if not isinstance(arena, ArenaAPI):
+        raise TypeError(f"env must be an ArenaAPI or a factory of one, got {type(arena)!r}")
+    return arena
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The shape of an arena's task, read once from ``get_env_info`` (fixed by its options)."""
+
+    agents: tuple[str, ...]
+    """Controlled robots in the arena's order (blue first), e.g. ``("blue_0", "blue_1")``."""
+    kind: str
+    """The arena's action space option: "abstract", "discrete" or "continuous"."""
+    n_actions: int
+    """Flat discrete choices per agent (for continuous: target enemies)."""
+    n_enemies: int
+    obs_dim: int
+    state_dim: int
+    episode_limit: int
+    """Decisions per episode at most."""
+    decision_steps: int
+    mode: str
+
+    @classmethod
+    def of(cls, arena: ArenaAPI) -> Layout:
+        info = arena.get_env_info()
+        layout = cls(
+            agents=tuple(info["agents"]), kind=info["action_space"],
+            n_actions=int(info["n_actions"]), n_enemies=int(info["n_enemies"]),
+            obs_dim=int(info["obs_shape"]), state_dim=int(info["state_shape"]),
+            episode_limit=int(info["episode_limit"]),
+            decision_steps=int(info["decision_steps"]), mode=info["mode"],
+        )  # fmt: skip
+        if not layout.agents:
+            raise InvalidOptionError(
+                f"mode={layout.mode!r} leaves no robot to control; use 'cooperative' or "
+                "'competitive'"
+            )
+        return layout
+
+    @property
+    def continuous(self) -> bool:
+        return self.kind == "continuous"
+
+    @property
+    def mask_key(self) -> str:
+        """Where masks go: ``"action_mask"``, or ``"target_mask"`` for continuous actions."""
+        return TARGET_MASK if self.continuous else ACTION_MASK
+
+    @property
+    def render_fps(self) -> float:
+        """Decisions per simulated second: one rendered frame per decision plays in real time."""
+        return PHYSICS_HZ / self.decision_steps
+
+    # ---- spaces -------------------------------------------------------------------------
+
+    def obs_space(self, n_agents: int | None = None) -> spaces.Box:
+        """One agent's observation, or ``n_agents`` of them stacked row by row."""
+        shape = (self.obs_dim,) if n_agents is None else (n_agents, self.obs_dim)
+        return spaces.Box(-1.0, 1.0, shape, np.float32)
+
+    def mask_space(self) -> spaces.Box:
+        """One agent's mask (int8 0/1), PettingZoo's classic ``action_mask`` space."""
+        return spaces.Box(0, 1, (self.n_actions,), np.int8)
+
+    def state_space(self) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (self.state_dim,), np.float32)
+
+    def motion_box(self, n_agents: int | None = None) -> spaces.Box:
+        """Continuous actions: ``(vx, vy, omega, target)`` per row, see the module docstring."""
+        low = np.append(MOTION_LOW, np.float32(0.0))
+        high = np.append(MOTION_HIGH, np.float32(self.n_enemies))
+        if n_agents is not None:
+            low, high = np.tile(low, (n_agents, 1)), np.tile(high, (n_agents, 1))
+        return spaces.Box(low, high, dtype=np.float32)
+
+    def agent_action_space(self) -> spaces.Space[Any]:
+        if self.continuous:
+            return self.motion_box()
+        return spaces.Discrete(self.n_actions)
+
+    # ---- conversions --------------------------------------------------------------------
+
+    def noop(self) -> Any:
+        """The action sent for a robot nobody controls any more (a destroyed one): stand
+        still, aim at the first enemy — the only action its mask allows."""
+        return [0.0, 0.0, 0.0, 0] if self.continuous else 0
+
+    def to_arena(self, agent: str, action: Any) -> Any:
+        """A policy's action for ``agent`` → the arena's: plain Python numbers for the wire.
+
+        Range and type errors are left to the arena, which names the bound, except the
+        target bin, which only exists on this side.
+        """
+        if not self.continuous:
+            if isinstance(action, np.ndarray) and action.shape == ():
+                return action.item()
+            return action.item() if isinstance(action, np.generic) else action
+        arr = np.asarray(action, dtype=np.float64)
+        if arr.shape != (4,) or not np.isfinite(arr).all():
+            raise InvalidActionError(
+                f"{agent}: a continuous action is 4 finite numbers (vx, vy, omega, target), "
+                f"got {action!r}"
+            )
+        target = arr[3]
+        if not 0.0 <= target <= self.n_enemies:
+            raise InvalidActionError(
+                f"{agent}: target={target} is outside [0, {self.n_enemies}] (enemy i is the bin "
+                "[i, i + 1))"
+            )
+        index = min(int(np.floor(target)), self.n_enemies - 1)
+        return [float(arr[0]), float(arr[1]), float(arr[2]), index]
+
+    def team_split(self, alive: list[bool]) -> tuple[list[bool], list[bool]]:
+        """Blue's and red's ``alive`` flags (red is the enemy team of width ``n_enemies``)."""
+        return alive[: len(alive) - self.n_enemies], alive[len(alive) - self.n_enemies :]
+
+    def annihilated(self, info: Mapping[str, Any]) -> bool:
+        """Whether a team has no robot left: the episode's terminal state, as opposed to the
+        time limit. Read from ``alive`` rather than ``t`` so a wipe-out on the last physics
+        step still counts as terminal."""
+        blue, red = self.team_split(list(info["alive"]))
+        return not any(blue) or not any(red)
