@@ -18,10 +18,10 @@ import math
 
 import numpy as np
 import pybullet as pb
-
-from bench.common import machine, rate, table, write_json
 from neuronsmae.server import Arena
 from neuronsmae.server.sim.world import World
+
+from bench.common import machine, rate, table, write_json
 
 CONFIGS = {
     "continuous": {"action_space": "continuous"},
@@ -42,8 +42,10 @@ def arena_runner(options: dict, seed: int = 0):
 
     def one() -> int:
         if continuous:
-            acts = [np.array([*rng.uniform(-1.5, 1.5, 2), rng.uniform(-1.5, 1.5),
-                              rng.integers(2)]) for _ in range(n)]
+            acts = [
+                np.array([*rng.uniform(-1.5, 1.5, 2), rng.uniform(-1.5, 1.5), rng.integers(2)])
+                for _ in range(n)
+            ]
         else:
             acts = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
         _, _, done, _ = arena.step(acts)
@@ -65,8 +67,9 @@ def bare_runners(seed: int = 0):
     def kick() -> None:
         for b in bodies:
             v = rng.uniform(-1.5, 1.5, 2)
-            pb.resetBaseVelocity(b, (v[0], v[1], 0.0), (0.0, 0.0, rng.uniform(-1, 1)),
-                                 physicsClientId=cid)
+            pb.resetBaseVelocity(
+                b, (v[0], v[1], 0.0), (0.0, 0.0, rng.uniform(-1, 1)), physicsClientId=cid
+            )
 
     def step_only() -> int:
         kick()
@@ -100,18 +103,41 @@ def main() -> None:
     med = {name: float(np.median(v)) for name, v in samples.items()}
     rows = []
     for name, value in med.items():
-        rows.append({
-            "configuration": name,
-            "decisions/s (median)": value,
-            "× real time": value * 0.4,
-            "% of bare step": 100 * value / med["bare step"],
-            "% of bare drive": 100 * value / med["bare drive"],
-            "min": float(min(samples[name])), "max": float(max(samples[name])),
-        })
-    print(table(rows, ["configuration", "decisions/s (median)", "× real time", "% of bare step",
-                       "% of bare drive", "min", "max"]))
-    path = write_json("env", {"rows": rows, "samples": samples, "machine": machine(),
-                              "seconds": args.seconds, "repeats": args.repeats})
+        rows.append(
+            {
+                "configuration": name,
+                "decisions/s (median)": value,
+                "× real time": value * 0.4,
+                "% of bare step": 100 * value / med["bare step"],
+                "% of bare drive": 100 * value / med["bare drive"],
+                "min": float(min(samples[name])),
+                "max": float(max(samples[name])),
+            }
+        )
+    print(
+        table(
+            rows,
+            [
+                "configuration",
+                "decisions/s (median)",
+                "× real time",
+                "% of bare step",
+                "% of bare drive",
+                "min",
+                "max",
+            ],
+        )
+    )
+    path = write_json(
+        "env",
+        {
+            "rows": rows,
+            "samples": samples,
+            "machine": machine(),
+            "seconds": args.seconds,
+            "repeats": args.repeats,
+        },
+    )
     print(f"\nwrote {path}")
 
 

@@ -23,18 +23,27 @@ def rate(fn: Callable[[], int], seconds: float, repeats: int) -> dict[str, float
         while time.perf_counter() - start < seconds:
             done += fn()
         rates.append(done / (time.perf_counter() - start))
-    return {"median": statistics.median(rates), "min": min(rates), "max": max(rates),
-            "repeats": repeats}
+    return {
+        "median": statistics.median(rates),
+        "min": min(rates),
+        "max": max(rates),
+        "repeats": repeats,
+    }
 
 
 def machine() -> dict[str, Any]:
     """What the numbers were measured on."""
-    return {"python": platform.python_version(), "machine": platform.machine(),
-            "cpus": os.cpu_count(), "load1": os.getloadavg()[0]}
+    return {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpus": os.cpu_count(),
+        "load1": os.getloadavg()[0],
+    }
 
 
 def table(rows: list[dict[str, Any]], columns: list[str]) -> str:
     """A Markdown table of ``rows`` restricted to ``columns``."""
+
     def fmt(v: Any) -> str:
         return f"{v:,.1f}" if isinstance(v, float) else str(v)
 

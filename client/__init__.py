@@ -9,3 +9,10 @@ from __future__ import annotations
 from neuronsmae.client.rm import RM, context_table, ping
 
 __all__ = ["RM", "context_table", "ping"]
+
+# Ecosystem faces (Gymnasium, PettingZoo) over any ArenaAPI; registers NeuronsMAE/Coop-v0.
+from neuronsmae.client.gym_env import CoopEnv, register_envs
+from neuronsmae.client.pz_env import ArenaParallelEnv, parallel_env
+
+__all__ += ["ArenaParallelEnv", "CoopEnv", "parallel_env"]
+register_envs()

@@ -47,7 +47,8 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     ``gymnasium.make`` needs when it re-creates the environment (``check_env``, vector envs);
     ``CoopEnv(seed=0, port=10000, action_space="discrete", ...)`` (no ``env``) builds a remote
     ``RM`` with those arguments, launching a local server if none answers. The environment
-    owns its arena whichever way it came: :meth:`close` closes it.
+    owns its arena whichever way it came — :meth:`close` closes it — except when construction
+    fails: an arena passed in is then left to the caller.
 
     ``contexts`` are the reset contexts of every episode; ``reset(options={"contexts": ...})``
     updates them for one episode (keys given there win; other option keys are ignored).
@@ -76,7 +77,8 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
                     f"{layout.mode!r}; use the PettingZoo face for both teams"
                 )
         except BaseException:
-            self.arena.close()
+            if not isinstance(env, ArenaAPI):  # built here: nobody else can close it
+                self.arena.close()
             raise
         self.n_agents = n = len(layout.agents)
         self.metadata = {**type(self).metadata, "render_fps": layout.render_fps}
@@ -98,15 +100,12 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         obs = self.arena.reset(contexts or None, seed)
         return self._stack(obs), self._mask_info()
 
-    def step(
-        self, action: np.ndarray
-    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         obs, rewards, done, info = self.arena.step(self._to_arena(action))
         terminated = bool(done) and self.layout.annihilated(info)
         truncated = bool(done) and not terminated
-        return self._stack(obs), float(rewards[0]), terminated, truncated, {
-            **info, **self._mask_info(),
-        }
+        info = {**info, **self._mask_info()}
+        return self._stack(obs), float(rewards[0]), terminated, truncated, info
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The top-down RGB frame (H × W × 3 uint8) when ``render_mode="rgb_array"``."""
@@ -148,8 +147,10 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
                 f"the joint action must have shape {want} (one entry per blue robot), got "
                 f"shape {joint.shape}"
             )
-        return [self.layout.to_arena(name, row) for name, row in zip(
-            self.layout.agents, joint, strict=True)]
+        return [
+            self.layout.to_arena(name, row)
+            for name, row in zip(self.layout.agents, joint, strict=True)
+        ]
 
 
 def register_envs() -> None:

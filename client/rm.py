@@ -36,6 +36,7 @@ from neuronsmae.protocol.messages import (
     ErrorReply,
     Get,
     Message,
+    OkReply,
     Ping,
     Render,
     Reply,
@@ -102,6 +103,8 @@ class RM(ArenaAPI):
         self._link = Link(host, port)
         self._server: ServerProcess | None = None
         self._closer: weakref.finalize | None = None
+        self._cache: dict[str, Any] = {}
+        """What the last reset/step left: obs, state, avail_actions (private copies)."""
         try:
             self._connect(launch, no_graphics, time_scale)
             farewell = encode_request(Close(), self.session_id)
@@ -135,12 +138,15 @@ class RM(ArenaAPI):
         return True
 
     def _configure(self) -> None:
+        self._cache.clear()
         self._call(Configure(seed=self.seed, options=self.options), InvalidOptionError)
 
     # ---- one request -------------------------------------------------------------------
 
-    def _call(self, body: Message, bad_input: type[NeuronsMAEError] = MalformedMessageError) -> Any:
-        """Send ``body``, return the reply's value or raise the server's error as its type.
+    def _call(
+        self, body: Message, bad_input: type[NeuronsMAEError] = MalformedMessageError
+    ) -> OkReply:
+        """Send ``body``, return the reply or raise the server's error as its type.
 
         ``bad_input`` is the error raised when the arguments cannot even be encoded, the
         same type the in-process arena raises for unusable arguments.
@@ -161,7 +167,19 @@ class RM(ArenaAPI):
             reply = self._send(data)
         if isinstance(reply, ErrorReply):
             raise error_from_code(reply.code, reply.message)
-        return reply.value
+        return reply
+
+    def _remember(self, obs: list[np.ndarray], reply: OkReply) -> None:
+        """Keep copies of what the arena looks like now, until the next reset or step."""
+        snapshot = reply.snapshot or {}
+        if {"state", "avail_actions"} <= snapshot.keys():
+            self._cache = {"obs": _copy(obs), **snapshot}
+
+    def _read(self, what: str) -> Any:
+        """``get_<what>`` from the cache when fresh (as copies, like the arena), else asked."""
+        if what in self._cache:
+            return _copy(self._cache[what])
+        return self._call(Get(what=what)).value
 
     def _send(self, data: bytes) -> Reply:
         raw = self._link.call(data, self.timeout)
@@ -176,32 +194,38 @@ class RM(ArenaAPI):
         self, contexts: Mapping[str, Any] | None = None, seed: int | None = None
     ) -> list[np.ndarray]:
         wire = None if contexts is None else dict(contexts)
-        return list(self._call(Reset(contexts=wire, seed=seed), InvalidContextError))
+        self._cache.clear()
+        reply = self._call(Reset(contexts=wire, seed=seed), InvalidContextError)
+        obs = list(reply.value)
+        self._remember(obs, reply)
+        return obs
 
     def step(
         self, actions: Sequence[Action]
     ) -> tuple[list[np.ndarray], list[float], bool, dict[str, Any]]:
         wire = actions if isinstance(actions, np.ndarray) else list(actions)
-        value = self._call(Step(actions=wire), InvalidActionError)
-        if not isinstance(value, list) or len(value) != 4:
+        self._cache.clear()
+        reply = self._call(Step(actions=wire), InvalidActionError)
+        if not isinstance(reply.value, list) or len(reply.value) != 4:
             raise ServerError("the server's step reply is not [obs, rewards, done, info]")
-        obs, rewards, done, info = value
+        obs, rewards, done, info = reply.value
+        self._remember(obs, reply)
         return obs, rewards, done, info
 
     def get_obs(self) -> list[np.ndarray]:
-        return self._call(Get(what="obs"))
+        return self._read("obs")
 
     def get_state(self) -> np.ndarray:
-        return self._call(Get(what="state"))
+        return self._read("state")
 
     def get_avail_actions(self) -> list[np.ndarray]:
-        return self._call(Get(what="avail_actions"))
+        return self._read("avail_actions")
 
     def get_env_info(self) -> dict[str, Any]:
-        return self._call(Get(what="env_info"))
+        return self._read("env_info")
 
     def render(self) -> np.ndarray:
-        return self._call(Render())
+        return self._call(Render()).value
 
     def close(self) -> None:
         if self._closer is not None:
@@ -213,6 +237,15 @@ class RM(ArenaAPI):
 
     def __enter__(self) -> RM:
         return self
+
+
+def _copy(value: Any) -> Any:
+    """Fresh arrays in fresh lists, so callers may modify what they get."""
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, list):
+        return [_copy(v) for v in value]
+    return value
 
 
 def _query(body: Message, port: int, host: str, timeout: float) -> Any:

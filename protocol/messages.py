@@ -244,9 +244,15 @@ def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:
 
 @dataclass(frozen=True)
 class OkReply:
-    """A request succeeded; ``value`` is what the ``ArenaAPI`` method returns."""
+    """A request succeeded; ``value`` is what the ``ArenaAPI`` method returns.
+
+    ``snapshot`` (``reset`` and ``step`` replies only) holds what ``get_state`` and
+    ``get_avail_actions`` return right after the request. A trainer reads both after every
+    decision, so carrying them here saves two round trips per decision.
+    """
 
     value: Any = None
+    snapshot: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -267,15 +273,23 @@ Reply = OkReply | ErrorReply
 def encode_reply(reply: Reply) -> bytes:
     """The wire bytes of a reply; an unencodable value raises ``MalformedMessageError``."""
     if isinstance(reply, OkReply):
-        return encode({"ok": True, "value": reply.value})
+        wire = {"ok": True, "value": reply.value}
+        if reply.snapshot is not None:
+            wire["snapshot"] = reply.snapshot
+        return encode(wire)
     return encode({"ok": False, "code": reply.code, "message": reply.message})
 
 
 def decode_reply(data: bytes | bytearray | memoryview) -> Reply:
     """Decode a reply; a reply that is not one raises ``MalformedMessageError``."""
     wire = decode(data, max_bytes=MAX_REPLY_BYTES)
-    if isinstance(wire, dict) and wire.get("ok") is True and set(wire) == {"ok", "value"}:
-        return OkReply(wire["value"])
+    if (
+        isinstance(wire, dict)
+        and wire.get("ok") is True
+        and set(wire) in ({"ok", "value"}, {"ok", "value", "snapshot"})
+        and isinstance(wire.get("snapshot", {}), dict)
+    ):
+        return OkReply(wire["value"], wire.get("snapshot"))
     if (
         isinstance(wire, dict)
         and wire.get("ok") is False

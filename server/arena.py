@@ -291,7 +291,8 @@ class Arena(ArenaAPI):
         paths: list[np.ndarray | None] = []
         for i, intent in enumerate(intents):
             if intent.kind == KIND_GOAL and self.referee.alive[i]:
-                paths.append(self.planner.plan(xy[i], intent.goal, np.delete(xy, i, axis=0)))
+                others = xy[self.mates_of[i][1:].tolist() + self.enemies_of[i].tolist()]
+                paths.append(self.planner.plan(xy[i], intent.goal, others))
             else:
                 paths.append(None)
         return paths

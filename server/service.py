@@ -94,6 +94,10 @@ class _Built:
     used: bool = False
 
 
+SNAPSHOT_AFTER: frozenset[type[Message]] = frozenset({Reset, Step})
+"""Requests whose replies carry the state and availability masks (see ``OkReply``)."""
+
+
 def warm_up(factory: Callable[..., ArenaAPI], seed: int = 0) -> None:
     """Play one decision on a throwaway arena with the costliest options.
 
@@ -180,7 +184,9 @@ class ArenaService:
         reply: Reply
         try:
             request = decode_request(data)
-            reply = OkReply(self._dispatch(request))
+            value = self._dispatch(request)
+            snapshot = self._snapshot() if type(request.body) in SNAPSHOT_AFTER else None
+            reply = OkReply(value, snapshot)
         except NeuronsMAEError as exc:
             log.debug("request refused: %s: %s", exc.code, exc)
             reply = ErrorReply.from_exception(exc)
@@ -214,6 +220,10 @@ class ArenaService:
             f"this server's arena is owned by another client (idle {idle:.1f} s); it is "
             f"released when that client closes or after {self._lease_s:g} s of silence"
         )
+
+    def _snapshot(self) -> dict[str, Any]:
+        arena = self._arena
+        return {"state": arena.get_state(), "avail_actions": arena.get_avail_actions()}
 
     @property
     def _arena(self) -> ArenaAPI:

@@ -89,6 +89,8 @@ class Trainer:
         self.last_stats: dict[str, float] = {}
         self.evals: list[dict[str, Any]] = []
         self.stored_seeds: list[int] = []
+        """Reset seeds of the stored training episodes, in arrival order (for tests)."""
+        self.seen_restarts = 0
 
     def _build(self, cfg: TrainConfig) -> None:
         """Start the workers, then size the networks and the buffer from their env."""
@@ -204,8 +206,8 @@ class Trainer:
             c.episodes += 1
             c.env_steps += episode.length
             self.session_steps += episode.length
-        c.restarts += self.sampler.restarts - getattr(self, "_seen_restarts", 0)
-        self._seen_restarts = self.sampler.restarts
+        c.restarts += self.sampler.restarts - self.seen_restarts
+        self.seen_restarts = self.sampler.restarts
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
         if rounds and len(self.buffer) >= cfg.learning_starts:

@@ -19,6 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from neuronsmae.server.sim.field import obstacle_array
+from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, segment_blocked
+
+TALL = obstacle_array(tall_only=True)
 LOW_HP_FRACTION = 0.25
 """The hard bot's retreat threshold, as a fraction of starting HP."""
 
@@ -107,28 +111,57 @@ class MiddleBot:
 
 
 class HardBot:
-    """Besiege the least-HP enemy from distinct, high-damage points; retreat when weak.
+    """Besiege the weakest enemy from distinct, high-damage points; retreat when weak.
 
+    The target is the enemy the team can destroy soonest: its HP over the damage rate the
+    bot's robots would deal it from where they stand (distance band, line of sight, and the
+    plate each one faces), with hysteresis so the siege does not flip between enemies.
     States per robot: ``siege`` (default) and ``retreat`` (HP below 25 %: go to the
     candidate point farthest from every other enemy, still shooting at the target).
     """
 
+    SWITCH = 0.7
+    """A new target must be this much quicker to destroy than the current one."""
+
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
+        self.target: int | None = None
+
+    def _time_to_kill(self, view: BotView, j: int) -> float:
+        enemy = view.poses[view.enemies[j]]
+        rate = 0.0
+        for r in view.robots[view.alive[view.robots]]:
+            me = view.poses[r, :2]
+            d = float(np.hypot(*(me - enemy[:2])))
+            if d >= 9.0 or segment_blocked(me, enemy[:2], TALL, SIGHT_MIN_HEIGHT):
+                continue
+            rel = abs(np.angle(np.exp(1j * (np.arctan2(*(me - enemy[:2])[::-1]) - enemy[2]))))
+            plate = 1.0 if rel < np.pi / 4 else (3.0 if rel > 3 * np.pi / 4 else 2.0)
+            rate += (1.0 if d < 3.0 else 0.5 if d < 6.0 else 0.2) * plate
+        return float(view.hp[view.enemies[j]]) / max(rate, 0.1)
+
+    def _pick(self, view: BotView, live: np.ndarray) -> int:
+        ttk = {int(j): self._time_to_kill(view, int(j)) for j in live}
+        best = min(ttk, key=ttk.__getitem__)
+        if self.target in ttk and ttk[best] > self.SWITCH * ttk[self.target]:
+            best = self.target
+        self.target = best
+        return best
 
     def act(self, view: BotView) -> list[Choice]:
         live = _live(view)
-        e = _least_hp(view, 0, live)
+        e = self._pick(view, live)
         target = view.poses[view.enemies[e]]
         taken: list[np.ndarray] = []
         out: list[Choice] = []
         for i, r in enumerate(view.robots):
             pts = view.cands[i, e]
             me = view.poses[r, :2]
+            exposure = self._exposure(view, pts, live, e)
             if view.hp[r] < LOW_HP_FRACTION * view.max_hp[r]:
-                score = self._safety(view, pts, live, e)
+                score = self._safety(view, pts, live, e) - 2.0 * exposure
             else:
-                score = self._siege_score(pts, target, me)
+                score = self._siege_score(pts, target, me) - 1.5 * exposure
             for p in taken:  # distinct points: spread the siege around the target
                 score = score - 5.0 * (np.hypot(*(pts - p).T) < 0.8)
             c = int(np.argmax(score))
@@ -143,6 +176,20 @@ class HardBot:
         behind = -np.cos(rel)
         travel = np.hypot(*(pts - me).T)
         return 1.0 * behind - 0.6 * travel
+
+    @staticmethod
+    def _exposure(view: BotView, pts: np.ndarray, live: np.ndarray, e: int) -> np.ndarray:
+        """Expected hit factor the *other* live enemies would have on each point."""
+        out = np.zeros(len(pts))
+        for j in live:
+            if j == e:
+                continue
+            other = view.poses[view.enemies[j], :2]
+            for c, p in enumerate(pts):
+                d = float(np.hypot(*(p - other)))
+                if d < 9.0 and not segment_blocked(p, other, TALL, SIGHT_MIN_HEIGHT):
+                    out[c] += 1.0 if d < 3.0 else (0.5 if d < 6.0 else 0.2)
+        return out
 
     @staticmethod
     def _safety(view: BotView, pts: np.ndarray, live: np.ndarray, e: int) -> np.ndarray:

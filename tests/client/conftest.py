@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
@@ -37,6 +38,7 @@ class Server:
     def __init__(self, port: int, *args: str) -> None:
         self.port = port
         cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(port), *args]
+        cmd += ["--watch-parent", str(os.getpid())]  # no orphans if the test run is killed
         # A file, not a pipe, so a chatty server never blocks; closed in stop().
         self.log = tempfile.TemporaryFile()  # noqa: SIM115
         self.proc = subprocess.Popen(

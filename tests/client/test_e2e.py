@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -12,6 +11,7 @@ from typing import Any
 
 import msgpack
 import numpy as np
+import psutil
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -84,12 +84,15 @@ def play_in_lockstep(remote: ArenaAPI, local: ArenaAPI, decisions: int, seed: in
     contexts = {"Friction_coeff": 0.3, "VK1": 0.5, "coef": 0.8, "level": 1}
     assert same(remote.reset(contexts), local.reset(contexts))
     resets = iter([{"seed": 5}, {"contexts": {"level": "hard"}}, {}])
-    for _ in range(decisions):
+    for k in range(decisions):
         actions = policy(local, rng)
         result = remote.step(actions)
         assert same(result, local.step(actions))
+        if k % 7 == 3 and isinstance(remote, RM):
+            remote._cache.clear()  # ask the server instead of reading the step's snapshot
         assert same(remote.get_state(), local.get_state())
         assert same(remote.get_avail_actions(), local.get_avail_actions())
+        assert same(remote.get_obs(), local.get_obs())
         if result[2]:
             kwargs = next(resets)
             assert same(remote.reset(**kwargs), local.reset(**kwargs))
@@ -266,7 +269,7 @@ def test_dead_hung_and_restarted_server(start_server: Callable[..., Server]) -> 
         server.proc.send_signal(signal.SIGSTOP)  # hung: the query times out
         t0 = time.monotonic()
         with pytest.raises(ServerUnavailableError):
-            env.get_state()
+            env.get_env_info()
         assert 1.5 < time.monotonic() - t0 < 3.0
         server.proc.send_signal(signal.SIGCONT)
         server.proc.kill()  # dead: Zenoh ends the query at once
@@ -293,14 +296,10 @@ def test_dead_hung_and_restarted_server(start_server: Callable[..., Server]) -> 
 
 
 def test_port_in_use_fails_clearly(server_a: Server) -> None:
-    with socket.socket() as squatter:
-        squatter.bind(("127.0.0.1", 0))
-        squatter.listen()
-        for port in (server_a.port, squatter.getsockname()[1]):
-            cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(port)]
-            done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-            assert done.returncode == 2
-            assert f"port {port} on 127.0.0.1 is already in use" in done.stderr
+    cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(server_a.port)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert f"port {server_a.port} on 127.0.0.1 is already in use" in done.stderr
 
 
 def test_launch_paces_then_stops_its_server() -> None:
@@ -323,3 +322,41 @@ def test_launch_paces_then_stops_its_server() -> None:
     with pytest.raises(ServerUnavailableError):
         ping(port, timeout=0.5)
     env.close()  # twice is fine
+
+
+ORPHAN = """
+import sys
+from neuronsmae.client import RM
+env = RM(port=int(sys.argv[1]), time_scale=0)
+print(env._server.proc.pid, flush=True)
+sys.stdin.read()  # wait to be killed
+"""
+
+
+def test_launched_server_exits_when_its_client_is_killed() -> None:
+    port = free_port()
+    client = subprocess.Popen(
+        [sys.executable, "-c", ORPHAN, str(port)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        server_pid = int(client.stdout.readline())  # type: ignore[union-attr]
+        assert ping(port)["owned"] is True
+    finally:
+        client.kill()  # no close(): the server must notice on its own
+        client.wait()
+    deadline = time.monotonic() + 5.0
+    while _alive(server_pid):
+        assert time.monotonic() < deadline, "the launched server outlived its client"
+        time.sleep(0.05)
+    with pytest.raises(ServerUnavailableError):
+        ping(port, timeout=0.5)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False

@@ -160,7 +160,7 @@ def test_hostile_lengths_and_garbage_are_refused(payload: bytes) -> None:
         decode(payload, max_bytes=10_000)
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=512))
 def test_random_bytes_decode_or_fail_typed(data: bytes) -> None:
     with contextlib.suppress(MalformedMessageError, MessageTooLargeError):
@@ -188,7 +188,7 @@ values = st.recursive(
 )
 
 
-@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, suppress_health_check=[HealthCheck.too_slow])
 @given(values)
 def test_random_structures_round_trip(value: object) -> None:
     assert same(value, decode(encode(value), max_bytes=1 << 20))
@@ -231,6 +231,7 @@ def test_request_round_trip(body: object) -> None:
         OkReply(None),
         OkReply([[np.ones(3, np.float32)], [0.5, -0.0], True, {"winner": "blue"}]),
         OkReply(np.zeros((4, 5, 3), np.uint8)),
+        OkReply([np.ones(2)], {"state": np.ones(4), "avail_actions": [np.ones(3, np.int8)]}),
         *(ErrorReply(code, f"message for {code}") for code in ERRORS),
     ],
 )
@@ -287,13 +288,19 @@ def test_malformed_replies(payload: bytes) -> None:
         decode_reply(payload)
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+plain_values = st.recursive(
+    scalars,
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(), inner, max_size=3),
+)
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
 @given(
     st.dictionaries(
         st.sampled_from(
             ["v", "type", "session", "seed", "options", "contexts", "actions", "what", "junk"]
         ),
-        st.one_of(values, st.sampled_from([*MESSAGES, PROTOCOL_VERSION])),
+        st.one_of(plain_values, st.sampled_from([*MESSAGES, PROTOCOL_VERSION])),
         max_size=6,
     )
 )

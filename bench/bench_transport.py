@@ -1,0 +1,186 @@
+"""Transport overhead: decisions/s over Zenoh (RM) against the in-process Arena, same run.
+
+    python -m bench.bench_transport [--decisions 150] [--rounds 7] [--pings 2000]
+
+For each configuration both arenas play the same trainer-like loop (``get_avail_actions``,
+pick random allowed actions, ``step``, ``reset`` when done) for ``--decisions`` decisions,
+alternating in-process and remote rounds so load from other processes on the machine hits
+both alike; the median round rate of each is reported, and the median of the paired
+(remote / in-process) round ratios. The server is launched by ``RM`` on a
+free loopback port with ``time_scale=0`` (unpaced). Also measures the round trip of a
+``ping`` (median and p99). Prints a Markdown table and writes bench/out/transport.json.
+
+Wall-clock rates are what a trainer sees, but on a loaded machine they favour the remote
+pair (two processes that sleep in turn get more of a contended CPU than one busy process).
+The CPU-time rates (decisions per CPU second of the bench process, plus the server's for
+Zenoh) measure the transport's real cost whatever else runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+import psutil
+from neuronsmae.client import RM
+from neuronsmae.client.link import Link
+from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.messages import Ping, encode_request
+from neuronsmae.server.arena import Arena
+
+from bench.common import machine, table, write_json
+
+CONFIGS: dict[str, dict[str, Any]] = {
+    "abstract 2v2": {"action_space": "abstract", "n_blue": 2, "n_red": 2},
+    "continuous 2v2": {"action_space": "continuous", "n_blue": 2, "n_red": 2},
+}
+TARGET = 0.85
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cpu_seconds(procs: list[psutil.Process]) -> float:
+    """User + system CPU time used so far by ``procs`` (all their threads)."""
+    return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
+
+
+def play(
+    env: ArenaAPI,
+    decisions: int,
+    rng: np.random.Generator,
+    continuous: bool,
+    procs: list[psutil.Process],
+) -> tuple[float, float]:
+    """Decisions per wall-clock second and per CPU second (of ``procs``) of a trainer-like
+    loop on ``env``."""
+    env.reset()
+    wall, cpu = time.perf_counter(), cpu_seconds(procs)
+    for _ in range(decisions):
+        actions: list[Any] = []
+        for mask in env.get_avail_actions():
+            choice = int(rng.choice(np.flatnonzero(mask)))
+            actions.append([*rng.uniform(-1.5, 1.5, 3).tolist(), choice] if continuous else choice)
+        if env.step(actions)[2]:
+            env.reset()
+    wall, cpu = time.perf_counter() - wall, cpu_seconds(procs) - cpu
+    return decisions / wall, decisions / max(cpu, 1e-9)
+
+
+def launched_server(port: int) -> psutil.Process:
+    """The server process RM launched on ``port`` (a child of this process)."""
+    for child in psutil.Process().children():
+        if "neuronsmae.server" in child.cmdline() and str(port) in child.cmdline():
+            return child
+    raise RuntimeError(f"no launched server on port {port}")
+
+
+def _summary(local: list[float], remote: list[float]) -> tuple[float, float, float]:
+    """Medians of both, and the median of the paired ratios: each remote round runs right
+    after its in-process twin (same actions, same episodes), so paired ratios are the least
+    disturbed by other load on the machine."""
+    ratios = [r / p for p, r in zip(local, remote, strict=True)]
+    return statistics.median(local), statistics.median(remote), statistics.median(ratios)
+
+
+def compare(name: str, options: dict[str, Any], decisions: int, rounds: int) -> dict[str, Any]:
+    continuous = options["action_space"] == "continuous"
+    port = free_port()
+    local = Arena(seed=1, **options)
+    remote = RM(seed=1, port=port, time_scale=0, **options)
+    me = [psutil.Process()]
+    both = [*me, launched_server(port)]
+    try:
+        play(local, 5, np.random.default_rng(0), continuous, me)  # warm both up
+        play(remote, 5, np.random.default_rng(0), continuous, both)
+        runs: dict[str, list[tuple[float, float]]] = {"in_process": [], "zenoh": []}
+        for r in range(rounds):
+            runs["in_process"].append(
+                play(local, decisions, np.random.default_rng(r), continuous, me)
+            )
+            runs["zenoh"].append(
+                play(remote, decisions, np.random.default_rng(r), continuous, both)
+            )
+    finally:
+        remote.close()
+        local.close()
+    wall = _summary(*([w for w, _ in runs[k]] for k in ("in_process", "zenoh")))
+    cpu = _summary(*([c for _, c in runs[k]] for k in ("in_process", "zenoh")))
+    return {
+        "config": name,
+        "options": options,
+        "in_process_decisions_per_s": round(wall[0], 1),
+        "zenoh_decisions_per_s": round(wall[1], 1),
+        "ratio": round(wall[2], 3),
+        "in_process_decisions_per_cpu_s": round(cpu[0], 1),
+        "zenoh_decisions_per_cpu_s": round(cpu[1], 1),
+        "cpu_ratio": round(cpu[2], 3),
+        "rounds": {k: [[round(w, 1), round(c, 1)] for w, c in v] for k, v in runs.items()},
+    }
+
+
+def ping_rtt(pings: int) -> dict[str, float]:
+    """Round trip of an empty request through the full stack (encode, Zenoh, decode)."""
+    port = free_port()
+    with RM(port=port, time_scale=0):  # launches the server; the link below only pings it
+        link = Link("127.0.0.1", port)
+        try:
+            payload = encode_request(Ping(), "bench")
+            for _ in range(50):
+                link.call(payload, 2.0)
+            times = []
+            for _ in range(pings):
+                start = time.perf_counter()
+                link.call(payload, 2.0)
+                times.append(time.perf_counter() - start)
+        finally:
+            link.close()
+    times.sort()
+    return {
+        "pings": pings,
+        "median_us": round(statistics.median(times) * 1e6, 1),
+        "p99_us": round(times[int(0.99 * (len(times) - 1))] * 1e6, 1),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--decisions", type=int, default=150)
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--pings", type=int, default=2000)
+    args = parser.parse_args()
+    results = [compare(n, o, args.decisions, args.rounds) for n, o in CONFIGS.items()]
+    rtt = ping_rtt(args.pings)
+    columns = [
+        "config",
+        "in_process_decisions_per_s",
+        "zenoh_decisions_per_s",
+        "ratio",
+        "in_process_decisions_per_cpu_s",
+        "zenoh_decisions_per_cpu_s",
+        "cpu_ratio",
+    ]
+    print(table(results, columns))
+    print(f"target: zenoh ≥ {TARGET:.0%} of in-process")
+    print(f"ping round trip: median {rtt['median_us']:.0f} µs, p99 {rtt['p99_us']:.0f} µs")
+    report = {
+        "decisions_per_round": args.decisions,
+        "rounds": args.rounds,
+        "target_ratio": TARGET,
+        "results": results,
+        "ping": rtt,
+        "machine": machine(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    print(f"wrote {write_json('transport', report)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,217 @@
+"""The PettingZoo face: the parallel API and seed tests, agent removal, masks, RM parity."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from neuronsmae.client import RM, ArenaParallelEnv, parallel_env
+from neuronsmae.protocol.errors import InvalidActionError
+from neuronsmae.server import Arena
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from .conftest import Server, same
+
+KINDS = ("abstract", "discrete", "continuous")
+MODES = ("cooperative", "competitive")
+SHORT = {"episode_steps": 200}
+"""Short episodes (4 s): the checkers run whole episodes."""
+BLUE_LOSES = {"coef": 10.0, "opponent_hp": 10000.0}
+"""Contexts under which red destroys blue robots one by one within a few decisions."""
+RM_TIMEOUT = 60.0
+"""A fresh server JIT-compiles on its first step; on a loaded machine that exceeds 10 s."""
+
+
+def factory(
+    kind: str = "abstract", mode: str = "cooperative", **options: Any
+) -> Callable[[], Arena]:
+    return lambda: Arena(seed=7, action_space=kind, mode=mode, **{**SHORT, **options})
+
+
+@pytest.fixture
+def make() -> Iterator[Callable[..., ArenaParallelEnv]]:
+    """Build parallel envs over in-process arenas; all are closed when the test ends."""
+    built: list[ArenaParallelEnv] = []
+
+    def build(kind: str = "abstract", mode: str = "cooperative", **kwargs: Any) -> ArenaParallelEnv:
+        face = {k: kwargs.pop(k) for k in ("render_mode", "contexts") if k in kwargs}
+        env = ArenaParallelEnv(env=factory(kind, mode, **kwargs), **face)
+        built.append(env)
+        return env
+
+    yield build
+    for env in built:
+        env.close()
+
+
+def sample(env: ArenaParallelEnv, obs: dict[str, Any], agent: str) -> Any:
+    """A random action the agent's mask allows (continuous: any action, target masked)."""
+    space = env.action_space(agent)
+    if isinstance(space, spaces.Discrete):
+        return space.sample(mask=obs[agent]["action_mask"])
+    action = space.sample()
+    action[3] = space.np_random.choice(np.flatnonzero(obs[agent]["target_mask"]))
+    return action
+
+
+def play(env: ArenaParallelEnv, seed: int, **reset: Any) -> list[tuple[Any, ...]]:
+    """One whole episode of masked random actions; every step's 5-tuple plus ``agents``."""
+    obs, _ = env.reset(seed=seed, **reset)
+    for i, agent in enumerate(env.possible_agents):
+        env.action_space(agent).seed(seed + i)
+    steps = []
+    while env.agents:
+        step = env.step({a: sample(env, obs, a) for a in env.agents})
+        steps.append((*step, list(env.agents)))
+        obs = step[0]
+    return steps
+
+
+# ---- the checkers ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("kind", KINDS)
+def test_parallel_api_and_seed_tests_pass(kind: str, mode: str) -> None:
+    env = ArenaParallelEnv(env=factory(kind, mode))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the API test reports its findings as warnings
+        parallel_api_test(env, num_cycles=100)
+        parallel_seed_test(lambda: ArenaParallelEnv(env=factory(kind, mode)), num_cycles=50)
+    env.close()
+
+
+def test_aec_conversion_passes_the_api_test() -> None:
+    env = parallel_to_aec(ArenaParallelEnv(env=factory("discrete", "competitive")))
+    with warnings.catch_warnings():
+        # Advisory notes every Dict-observation environment (PettingZoo classic) gets.
+        warnings.filterwarnings("ignore", message="Observation (space|is not)")
+        api_test(env, num_cycles=30)
+    env.close()
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_whole_episodes_are_deterministic(make: Callable[..., ArenaParallelEnv], kind: str) -> None:
+    # PettingZoo's seed test stops after one step; this compares whole competitive episodes.
+    a, b = make(kind, "competitive"), make(kind, "competitive")
+    assert same(play(a, seed=4), play(b, seed=4))
+
+
+# ---- agents, spaces, masks ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_spaces_are_cached_per_agent(make: Callable[..., ArenaParallelEnv], kind: str) -> None:
+    env = make(kind, "competitive", n_blue=3, n_red=3)
+    assert env.possible_agents == ["blue_0", "blue_1", "blue_2", "red_0", "red_1", "red_2"]
+    assert env.agents == []  # until reset
+    key = "target_mask" if kind == "continuous" else "action_mask"
+    obs, infos = env.reset(seed=0)
+    assert env.agents == env.possible_agents and infos == {a: {} for a in env.agents}
+    for agent in env.possible_agents:
+        space = env.observation_space(agent)
+        assert space is env.observation_space(agent)
+        assert env.action_space(agent) is env.action_space(agent)
+        assert set(space.spaces) == {"observation", key} and space.contains(obs[agent])
+    assert env.observation_space("blue_0") is not env.observation_space("red_0")
+    assert env.state_space.contains(env.state())
+    if kind == "continuous":
+        space = env.action_space("red_2")
+        assert isinstance(space, spaces.Box) and space.shape == (4,) and space.high[3] == 3.0
+
+
+def test_destroyed_robots_leave_agents_for_good(make: Callable[..., ArenaParallelEnv]) -> None:
+    env = make("abstract", n_blue=3, n_red=3, episode_steps=3000, contexts=BLUE_LOSES)
+    steps = play(env, seed=5)
+    gone: set[str] = set()
+    lone_deaths = 0
+    for obs, rewards, term, trunc, infos, agents in steps:
+        live_before = set(obs)
+        assert not live_before & gone, "an agent came back"
+        assert set(rewards) == set(term) == set(trunc) == set(infos) == live_before
+        dead_now = {a for a in live_before if not infos[a]["alive"][int(a[-1])]}
+        assert {a for a in live_before if term[a]} >= dead_now
+        assert not any(trunc.values())
+        if dead_now and agents:
+            lone_deaths += 1  # destroyed while its team fights on
+            assert set(agents) == live_before - dead_now
+            assert all(obs[a]["action_mask"].tolist() == [1] + [0] * 11 for a in dead_now)
+        gone |= {a for a in live_before if term[a] or trunc[a]}
+    assert lone_deaths >= 1
+    assert gone == set(env.possible_agents)
+    last_infos = steps[-1][4]
+    assert next(iter(last_infos.values()))["winner"] == "red"
+
+
+def test_time_limit_truncates_every_agent(make: Callable[..., ArenaParallelEnv]) -> None:
+    env = make("discrete", "competitive")
+    steps = play(env, seed=1)
+    *_, (_, rewards, term, trunc, infos, agents) = steps
+    assert agents == [] and all(trunc.values()) and not any(term.values())
+    assert next(iter(infos.values()))["t"] == 200
+    team = next(iter(infos.values()))["team_reward"]
+    assert rewards == {a: team[0] if a.startswith("blue") else team[1] for a in rewards}
+
+
+def test_actions_needed_for_live_agents_only(make: Callable[..., ArenaParallelEnv]) -> None:
+    env = make("continuous", n_blue=2)
+    env.reset(seed=0)
+    with pytest.raises(InvalidActionError, match="blue_1"):
+        env.step({"blue_0": np.zeros(4, dtype=np.float32)})
+    zero = np.zeros(4, dtype=np.float32)
+    # Names that are not live (here: unknown) are ignored, as for destroyed agents.
+    obs, *_ = env.step({"blue_0": zero, "blue_1": zero, "red_0": zero})
+    assert set(obs) == {"blue_0", "blue_1"}
+
+
+def test_render_and_reset_contexts(make: Callable[..., ArenaParallelEnv]) -> None:
+    env = make("discrete", render_mode="rgb_array")
+    env.reset(seed=0, options={"contexts": {"opponent_hp": 1.0}})
+    frame = env.render()
+    assert frame is not None and frame.dtype == np.uint8 and frame.shape[2] == 3
+    assert env.metadata["render_fps"] == 10.0  # discrete: 5 physics steps per decision
+    _, _, _, _, infos = env.step(dict.fromkeys(env.agents, 0))
+    assert max(infos["blue_0"]["hp"][2:]) <= 1.0
+    with pytest.warns(UserWarning, match="without a render_mode"):
+        assert make("discrete").render() is None
+
+
+def test_parallel_env_constructor_refuses_options_beside_an_arena() -> None:
+    with pytest.raises(TypeError, match="mode"):
+        parallel_env(env=factory(), mode="competitive")
+
+
+# ---- over the remote client -----------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_api_and_seed_tests_over_rm(start_server: Callable[..., Server]) -> None:
+    ports = [start_server().port for _ in range(2)]
+    options = {"action_space": "continuous", "mode": "competitive", **SHORT}
+
+    def remote(port: int) -> ArenaParallelEnv:
+        return ArenaParallelEnv(seed=7, port=port, launch=False, timeout=RM_TIMEOUT, **options)
+
+    env = remote(ports[0])
+    try:
+        assert isinstance(env.arena, RM)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            parallel_api_test(env, num_cycles=100)
+        local = ArenaParallelEnv(env=Arena(seed=7, **options))
+        try:
+            assert same(play(env, seed=2), play(local, seed=2))
+        finally:
+            local.close()
+    finally:
+        env.close()
+    # The seed test holds two environments at once: one server each.
+    pending = iter(ports)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parallel_seed_test(lambda: remote(next(pending)), num_cycles=50)
