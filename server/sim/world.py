@@ -9,6 +9,7 @@ with walls, obstacles and other robots; any out-of-plane drift is projected away
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -129,10 +130,9 @@ class World:
     def close(self) -> None:
         """Disconnect the PyBullet client; safe to call twice."""
         if self.client >= 0:
-            try:
+            # Already disconnected (for example at interpreter shutdown) is fine.
+            with contextlib.suppress(pb.error):
                 pb.disconnect(physicsClientId=self.client)
-            except pb.error:
-                pass  # already disconnected (e.g. interpreter shutdown)
             self.client = -1
 
 

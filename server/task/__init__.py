@@ -1,1 +1,2 @@
-"""Task layer: action spaces, perception (candidate points, sight, LiDAR), observations, planner and bots."""
+"""Task layer: action spaces, perception (candidate points, sight, LiDAR), observations,
+planner and bots."""

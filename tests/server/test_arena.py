@@ -8,10 +8,10 @@ import sys
 
 import numpy as np
 import pytest
-
 from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, ResetNeededError
 from neuronsmae.server import Arena
 from neuronsmae.server.sim import field as F
+
 from tests.server.conftest import still
 
 START = np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (7.4, 3.9, np.pi), (7.5, 0.6, np.pi)])
@@ -27,7 +27,7 @@ def drive(contexts: dict, cmd: tuple = (2.0, 0.0, 0.0), decisions: int = 1,
     xs = []
     for k in range(decisions + then_stop):
         c = cmd if k < decisions else (0.0, 0.0, 0.0)
-        a.step([np.array([*c, 0])] + still(3))
+        a.step([np.array([*c, 0]), *still(3)])
         xs.append(a.poses[0].copy())
     a.close()
     return np.array(xs)
@@ -122,7 +122,7 @@ def _trajectory(seed: int) -> str:
         done = False
         while not done:
             acts = [int(rng.choice(np.flatnonzero(m))) for m in a.get_avail_actions()]
-            obs, rewards, done, info = a.step(acts)
+            obs, rewards, done, _info = a.step(acts)
             for o in obs:
                 h.update(o.tobytes())
             h.update(np.array(rewards).tobytes())

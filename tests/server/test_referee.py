@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from neuronsmae.server import Arena
+
 from tests.server.conftest import duel, still
 
 Y = 2.24  # the centre line: only low obstacles (B6, B8, B7) stand on it
@@ -97,7 +97,7 @@ def test_destroyed_robot_stays_as_obstacle() -> None:
     dead_at = a.poses[2].copy()
     # Drive blue into the wreck for two seconds: it does not move.
     for _ in range(5):
-        a.step([np.array([2.0, 0.0, 0.0, 1])] + still(3))
+        a.step([np.array([2.0, 0.0, 0.0, 1]), *still(3)])
     np.testing.assert_allclose(a.poses[2], dead_at, atol=1e-9)
     assert a.poses[0, 0] < dead_at[0] - 0.5  # blue is stopped by it (bodies 0.6 m long)
     a.close()
