@@ -23,6 +23,7 @@ from neuronsmae.server.sim.chassis import Chassis, ChassisParams
 from neuronsmae.server.sim.referee import BLUE, RED, Referee, StepTally
 from neuronsmae.server.sim.spawn import corner_poses, random_poses
 from neuronsmae.server.sim.world import World
+from neuronsmae.server.sim.zones import Zones
 from neuronsmae.server.task import observations as O
 from neuronsmae.server.task import perception as P
 from neuronsmae.server.task.actions import (
@@ -65,6 +66,7 @@ class Arena(ArenaAPI):
         self.chassis = Chassis(self.n)
         self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
         self.planner = Planner(resolution=cfg.planner_resolution)
+        self.zones = Zones(self.rng, cfg.n_blue, self.n) if cfg.zones else None
         self.decoder = ActionDecoder(cfg.action_space, cfg.n_red, cfg.k, cfg.clip_actions)
         self.poses = np.zeros((self.n, 3))
         self.t = 0
@@ -109,6 +111,9 @@ class Arena(ArenaAPI):
         self.chassis.reset(params)
         max_hp = np.where(self.team == RED, ctx.opponent_hp, float(F.START_HP))
         self.referee.reset(max_hp, ctx.coef)
+        if self.zones is not None:
+            self.zones.rng = self.rng
+            self.zones.reset()
         self.bots = {
             BLUE: make_bot(cfg.blue_level, self.rng) if cfg.mode == "bots" else None,
             RED: make_bot(ctx.level, self.rng) if cfg.mode == "cooperative" or cfg.mode == "bots"
@@ -146,6 +151,8 @@ class Arena(ArenaAPI):
             "t": self.t, "components": parts, "team_reward": team_r.tolist(),
             "targets": self.targets.tolist(),
         }
+        if self.zones is not None:
+            info |= self.zones.info()
         return self.get_obs(), rewards, self.done, info
 
     def get_obs(self) -> list[np.ndarray]:
@@ -317,10 +324,15 @@ class Arena(ArenaAPI):
 
     def _physics_step(self, tally: StepTally) -> None:
         ref = self.referee
-        vel = self.chassis.step(self.cmd)
+        cmd, targets = self.cmd, self.targets
+        if self.zones is not None:
+            self.zones.update(self.t, self.poses, ref.alive, ref.hp, ref.max_hp, ref.bullets)
+            cmd = np.where(self.zones.frozen(self.t)[:, None], 0.0, cmd)
+            targets = np.where(self.zones.silenced(self.t), -1, targets)
+        vel = self.chassis.step(cmd)
         self.world.step(self.poses, vel, ref.alive)
         was_alive = ref.alive.copy()
-        ref.physics_step(self.poses, self.targets, tally)
+        ref.physics_step(self.poses, targets, tally)
         for i in np.flatnonzero(was_alive & ~ref.alive):
             self.chassis.stop(int(i))
             self.cmd[i] = 0.0

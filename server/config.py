@@ -64,6 +64,8 @@ class ArenaConfig:
     """"dense" (damage, kills, win) or "sparse" (win/loss only)."""
     spawn: str = "random"
     """"random" (the released build) or "corners" (the RMUA birth areas)."""
+    zones: bool = False
+    """Enable the RMUA bonus/penalty zones (the released build had them do nothing)."""
     hit_mode: str = "expected"
     """"expected" damage per firing step, or "sampled" hits with that probability."""
     clip_actions: bool = False

@@ -1,0 +1,70 @@
+"""RMUA zones: dealt in symmetric pairs, triggered by the first robot on them, effects applied."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from neuronsmae.server import Arena
+from neuronsmae.server.sim import field as F
+from neuronsmae.server.sim.zones import EFFECT_PAIRS
+from tests.server.conftest import still
+
+
+def _on_zones(seed: int) -> tuple[Arena, dict]:
+    a = Arena(seed=seed, mode="competitive", action_space="continuous", zones=True)
+    a.reset()
+    a.referee.hp[:] = 300.0
+    # Everyone faces a wall and has no bullets: only zone effects change HP and ammunition.
+    poses = np.array([(*F.ZONES["F1"], np.pi), (*F.ZONES["F2"], np.pi), (*F.ZONES["F4"], 0.0),
+                      (7.5, 3.9, 0.0)])
+    a.place(poses, bullets=[0, 0, 0, 0])
+    _, _, _, info = a.step(still())
+    return a, info
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_zones_dealt_in_pairs_and_applied(seed: int) -> None:
+    a, info = _on_zones(seed)
+    log = {zone: (effect, robot) for _, zone, effect, robot in info["zone_log"]}
+    assert set(log) == {"F1", "F2", "F4"}
+    # F1 and F4 are a pair: they hold the two halves of one effect pair.
+    assert tuple(sorted((log["F1"][0], log["F4"][0]))) in {tuple(sorted(p)) for p in EFFECT_PAIRS}
+    hp, bullets = np.array(info["hp"]), np.array(info["bullets"])
+    effects = [e for e, _ in log.values()]
+    for team, robots in (("blue", slice(0, 2)), ("red", slice(2, 4))):
+        assert (hp[robots] == (500.0 if f"hp_{team}" in effects else 300.0)).all()
+        assert (bullets[robots] == (100 if f"ammo_{team}" in effects else 0)).all()
+    for effect, robot in log.values():
+        if effect == "no_move":
+            assert a.zones.frozen(a.t)[robot]
+        if effect == "no_shoot":
+            assert a.zones.silenced(a.t)[robot]
+    a.close()
+
+
+def test_frozen_robot_does_not_move_and_zone_is_spent() -> None:
+    for seed in range(20):
+        a, info = _on_zones(seed)
+        robots = [r for _, _, e, r in info["zone_log"] if e == "no_move"]
+        if not robots:
+            a.close()
+            continue
+        r = robots[0]
+        before = a.poses[r].copy()
+        acts = still()
+        acts[r] = np.array([2.0, 0.0, 0.0, 0])
+        _, _, _, info = a.step(acts)
+        np.testing.assert_allclose(a.poses[r, :2], before[:2], atol=1e-6)
+        assert len(info["zone_log"]) == 3  # standing on spent zones triggers nothing more
+        a.close()
+        return
+    pytest.fail("no seed dealt a no-move zone onto F1, F2 or F4")
+
+
+def test_zones_off_by_default() -> None:
+    a = Arena(seed=1)
+    a.reset()
+    _, _, _, info = a.step([0, 0])
+    assert "zones" not in info
+    a.close()
