@@ -149,7 +149,7 @@ class Arena(ArenaAPI):
         rewards = [float(team_r[self.team[i]]) for i in self.agents]
         info = self.referee.info() | {
             "t": self.t, "components": parts, "team_reward": team_r.tolist(),
-            "targets": self.targets.tolist(),
+            "targets": self.targets.tolist(), "contacts": self.world.contacts(),
         }
         if self.zones is not None:
             info |= self.zones.info()

@@ -119,6 +119,11 @@ class World:
             new.append((pos[0], pos[1], yaw))
         poses[:] = new
 
+    def contacts(self) -> list[int]:
+        """Contact points each robot has right now (walls, obstacles or robots); 0 = free."""
+        cid = self.client
+        return [len(pb.getContactPoints(bodyA=b, physicsClientId=cid)) for b in self.bodies]
+
     def _place(self, body: int, pos: tuple[float, float, float], yaw: float) -> None:
         q = (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
         pb.resetBasePositionAndOrientation(body, pos, q, physicsClientId=self.client)
