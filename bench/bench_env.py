@@ -18,10 +18,10 @@ import math
 
 import numpy as np
 import pybullet as pb
-from neuronsmae.server import Arena
-from neuronsmae.server.sim.world import World
 
 from bench.common import machine, rate, table, write_json
+from neuronsmae.server import Arena
+from neuronsmae.server.sim.world import World
 
 CONFIGS = {
     "continuous": {"action_space": "continuous"},

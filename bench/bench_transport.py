@@ -26,13 +26,13 @@ from typing import Any
 
 import numpy as np
 import psutil
+
+from bench.common import machine, table, write_json
 from neuronsmae.client import RM
 from neuronsmae.client.link import Link
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.messages import Ping, encode_request
 from neuronsmae.server.arena import Arena
-
-from bench.common import machine, table, write_json
 
 CONFIGS: dict[str, dict[str, Any]] = {
     "abstract 2v2": {"action_space": "abstract", "n_blue": 2, "n_red": 2},

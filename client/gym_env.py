@@ -31,6 +31,7 @@ from typing import Any, ClassVar
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+
 from neuronsmae.client.spaces import ArenaSource, Layout, open_arena
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 
 import zenoh
+
 from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.protocol.messages import rpc_key
 from neuronsmae.protocol.transport import client_config, endpoint
@@ -18,18 +19,23 @@ from neuronsmae.protocol.transport import client_config, endpoint
 class Link:
     """A lazily opened Zenoh client session bound to one server's queryable."""
 
-    def __init__(self, host: str, port: int) -> None:
-        self.host, self.port = host, port
-        self.where = f"{endpoint(host, port)} ({rpc_key(port)})"
+    def __init__(self, host: str, port: int, router: str | None = None) -> None:
+        self.host, self.port, self.router = host, port, router
+        self.where = (
+            f"{rpc_key(port)} via router {router}"
+            if router
+            else f"{endpoint(host, port)} ({rpc_key(port)})"
+        )
         self._key = rpc_key(port)
         self._session: zenoh.Session | None = None
         self._queriers: dict[float, zenoh.Querier] = {}
 
     def open(self) -> bool:
-        """Open the session if needed; False when nothing listens on the endpoint."""
+        """Open the session if needed; False when nothing listens on the endpoint (or the
+        router, when there is one: then only a query tells whether the server is there)."""
         if self._session is None:
             try:
-                self._session = zenoh.open(client_config(self.host, self.port))
+                self._session = zenoh.open(client_config(self.host, self.port, self.router))
             except zenoh.ZError:
                 return False
         return True

@@ -30,10 +30,11 @@ from typing import Any, ClassVar
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from pettingzoo.utils.env import ParallelEnv
+
 from neuronsmae.client.spaces import ArenaSource, Layout, open_arena
 from neuronsmae.protocol.errors import InvalidActionError
 from neuronsmae.protocol.interface import ArenaAPI
-from pettingzoo.utils.env import ParallelEnv
 
 AgentID = str
 ObsDict = dict[str, np.ndarray]

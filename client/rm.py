@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
 from neuronsmae.client.launcher import ServerProcess, is_local
 from neuronsmae.client.link import Link
 from neuronsmae.protocol.errors import (
@@ -84,6 +85,10 @@ class RM(ArenaAPI):
     this way) and stopped by :meth:`close`. Every request waits at most ``timeout``
     seconds, then raises ``ServerUnavailableError``; if the server comes back, the next
     request configures it again and carries on (the episode in progress is lost).
+
+    ``router`` (a Zenoh locator such as ``"tcp/10.0.0.1:7447"``) reaches the server on
+    ``port`` through that router instead of at ``host``: for servers started with
+    ``--router`` on machines this one cannot connect to directly. Nothing is launched then.
     """
 
     def __init__(
@@ -95,12 +100,14 @@ class RM(ArenaAPI):
         host: str = "127.0.0.1",
         launch: bool = True,
         timeout: float = 10.0,
+        router: str | None = None,
         **options: Any,
     ) -> None:
         self.seed, self.port, self.host, self.timeout = seed, port, host, float(timeout)
+        self.router = router
         self.options = dict(options)
         self.session_id = uuid.uuid4().hex
-        self._link = Link(host, port)
+        self._link = Link(host, port, router)
         self._server: ServerProcess | None = None
         self._closer: weakref.finalize | None = None
         self._cache: dict[str, Any] = {}
@@ -120,6 +127,8 @@ class RM(ArenaAPI):
         if self._link.open():
             return
         where = self._link.where
+        if self.router:
+            raise ServerUnavailableError(f"cannot reach the Zenoh router for {where}")
         if not launch:
             raise ServerUnavailableError(f"no server listens on {where} (launch=False)")
         if not is_local(self.host):

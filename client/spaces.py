@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
 

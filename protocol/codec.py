@@ -25,6 +25,7 @@ from typing import Any
 
 import msgpack
 import numpy as np
+
 from neuronsmae.protocol.errors import MalformedMessageError, MessageTooLargeError
 
 EXT_NDARRAY = 1

@@ -97,3 +97,31 @@ ERRORS: dict[str, type[NeuronsMAEError]] = {
 def error_from_code(code: str, message: str) -> NeuronsMAEError:
     """Rebuild an exception from its wire code; an unknown code becomes :class:`ServerError`."""
     return ERRORS.get(code, ServerError)(message)
+
+
+# --- recordings (local files, never sent over the wire, so not in ERRORS) -------------------
+
+
+class RecordingFormatError(NeuronsMAEError, ValueError):
+    """An episode recording cannot be read: not gzip/JSON, wrong format name or version,
+    or a line lacks a required field."""
+
+    code = "bad_recording"
+
+
+class ReplayMismatchError(NeuronsMAEError):
+    """Re-simulating a recording diverged from it; ``decision`` is the first that differs
+    (0 = the state right after ``reset``)."""
+
+    code = "replay_mismatch"
+
+    def __init__(self, message: str, decision: int = -1) -> None:
+        super().__init__(message)
+        self.decision = decision
+
+
+class MissingDependencyError(NeuronsMAEError, ImportError):
+    """An optional feature needs a package that is not installed; the message names the
+    ``pip install 'neuronsmae[extra]'`` that adds it."""
+
+    code = "missing_dependency"

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+
 from neuronsmae.protocol.codec import decode, encode
 from neuronsmae.protocol.errors import (
     MalformedMessageError,

@@ -4,11 +4,17 @@ Both ends are pinned to one explicit TCP endpoint with every form of discovery o
 server is reachable only where it was told to listen, a client talks only to the server it
 named, and two servers on one machine can never find each other (no multicast scouting, no
 gossip, no default ``tcp/[::]:0`` listener).
+
+A Zenoh *router* is the one opt-in exception, for clients on other machines: a server may
+also connect to routers (``server_config(..., routers=[...])``) and a client may connect to
+a router instead of the server (``client_config(..., router=...)``); the query then travels
+client → router → server, keyed by ``neuronsmae/<port>/rpc``. See ``deploy/README.md``.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 
 import zenoh
 
@@ -28,23 +34,30 @@ def _base_config(mode: str) -> zenoh.Config:
     return conf
 
 
-def server_config(host: str, port: int) -> zenoh.Config:
-    """A peer that listens on ``tcp/host:port`` only and connects nowhere."""
+def server_config(host: str, port: int, routers: Sequence[str] = ()) -> zenoh.Config:
+    """A peer that listens on ``tcp/host:port`` only and connects nowhere but ``routers``.
+
+    Routers (Zenoh locators such as ``tcp/10.0.0.1:7447``) let clients that cannot reach
+    ``host:port`` query this server through them. A peer keeps retrying a router that is
+    not up yet, so servers and router may start in any order.
+    """
     conf = _base_config("peer")
     conf.insert_json5("listen/endpoints", json.dumps([endpoint(host, port)]))
-    conf.insert_json5("connect/endpoints", "[]")
+    conf.insert_json5("connect/endpoints", json.dumps(list(routers)))
     return conf
 
 
-def client_config(host: str, port: int) -> zenoh.Config:
-    """A client that connects to ``tcp/host:port`` only and listens nowhere.
+def client_config(host: str, port: int, router: str | None = None) -> zenoh.Config:
+    """A client that connects to ``tcp/host:port`` only (or to ``router`` only) and listens
+    nowhere.
 
     In client mode ``zenoh.open`` fails at once when nothing listens there (which is how
     the client knows to launch a server) and, once open, the session reconnects by itself
     when a server comes back on that endpoint.
     """
     conf = _base_config("client")
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint(host, port)]))
+    target = router or endpoint(host, port)
+    conf.insert_json5("connect/endpoints", json.dumps([target]))
     conf.insert_json5("listen/endpoints", "[]")
     # Retry a lost server every 0.25 s at first and at least every second (Zenoh's default
     # backs off to 4 s), so a restarted server is found again soon after it listens.

@@ -1,13 +1,32 @@
 """The simulation side: the in-process :class:`Arena` and the Zenoh server that serves it.
 
 The server never imports the client or the trainers; what it shares with the client lives
-in :mod:`neuronsmae.protocol`.
+in :mod:`neuronsmae.protocol`. Names are imported lazily so that light commands (for example
+``neuronsmae-server`` failing fast on a port in use) do not pay for PyBullet and numba.
 """
 
 from __future__ import annotations
 
-from neuronsmae.server.arena import Arena
-from neuronsmae.server.config import ArenaConfig
-from neuronsmae.server.contexts import CONTEXT_TABLE, context_table, parse_contexts
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from neuronsmae.server.arena import Arena
+    from neuronsmae.server.config import ArenaConfig
+    from neuronsmae.server.contexts import CONTEXT_TABLE, context_table, parse_contexts
+
+_LAZY = {
+    "Arena": "neuronsmae.server.arena",
+    "ArenaConfig": "neuronsmae.server.config",
+    "CONTEXT_TABLE": "neuronsmae.server.contexts",
+    "context_table": "neuronsmae.server.contexts",
+    "parse_contexts": "neuronsmae.server.contexts",
+}
 
 __all__ = ["CONTEXT_TABLE", "Arena", "ArenaConfig", "context_table", "parse_contexts"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'neuronsmae.server' has no attribute {name!r}")

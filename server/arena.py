@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
 from neuronsmae.protocol.errors import ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.server.config import ArenaConfig
@@ -191,7 +192,7 @@ class Arena(ArenaAPI):
         }
 
     def render(self) -> np.ndarray:
-        if not self._obs:
+        if self._episodes == 0:  # not ``self._obs``: in "bots" mode there are no agents
             raise ResetNeededError("render() needs a scene: call reset() first")
         return render_scene(self)
 

@@ -16,7 +16,10 @@ import sys
 from collections.abc import Sequence
 
 import zenoh
+
 from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.server.arena import Arena
+from neuronsmae.server.contexts import context_table
 from neuronsmae.server.rpc import (
     Interrupted,
     PortInUseError,
@@ -56,6 +59,14 @@ def _parser() -> argparse.ArgumentParser:
         "--host",
         default="127.0.0.1",
         help="address to listen on (127.0.0.1; 0.0.0.0 for remote clients)",
+    )
+    p.add_argument(
+        "--router",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="also connect to this Zenoh router (e.g. tcp/10.0.0.1:7447), so clients that "
+        "cannot reach --host reach the server through it (repeatable)",
     )
     p.add_argument(
         "--lease",
@@ -120,9 +131,6 @@ def run(argv: Sequence[str] | None = None) -> int:
 
 
 def _serve(args: argparse.Namespace, stop: StopSignal) -> int:
-    from neuronsmae.server.arena import Arena  # heavy (PyBullet, numba): after the port check
-    from neuronsmae.server.contexts import context_table
-
     service = ArenaService(
         Arena,
         seed=args.seed,
@@ -130,6 +138,6 @@ def _serve(args: argparse.Namespace, stop: StopSignal) -> int:
         lease_s=args.lease,
         context_table=context_table,
     )
-    with service, RpcServer(service, args.host, args.port, stop) as server:
+    with service, RpcServer(service, args.host, args.port, stop, args.router) as server:
         server.serve_forever()
     return 0

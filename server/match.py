@@ -1,12 +1,14 @@
 """``neuronsmae-match``: play bots (or trained policies) against each other and score them.
 
     neuronsmae-match --blue hard --red easy --episodes 200 --seed 0 [--json]
+                     [--record DIR] [--gif OUT.gif]
 
 ``--blue`` and ``--red`` take a bot level (easy, middle, hard, random). ``--blue`` may also
 be a path to a trained checkpoint: the policy is loaded through the ``neuronsmae.policies``
 entry-point group (the trainers register theirs), so the server package never imports the
 trainers. Episode ``i`` uses seed ``seed + i``, so two runs with the same arguments give the
-same numbers.
+same numbers. ``--record DIR`` writes every episode as a replayable recording
+(``neuronsmae-replay``); ``--gif OUT`` draws the first episode.
 """
 
 from __future__ import annotations
@@ -21,9 +23,17 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Protocol
 
-from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
+from neuronsmae.protocol.recording import (
+    SUFFIX,
+    Decision,
+    Recording,
+    RecordingWriter,
+    decision_hash,
+)
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.config import LEVEL_NAMES
+from neuronsmae.server.video import write_video
 
 Z95 = 1.959963984540054
 
@@ -61,8 +71,36 @@ def load_policy(path: str) -> Policy:
     return loaders[0].load()(path)
 
 
-def play(blue: str, red: str, episodes: int, seed: int, **options: Any) -> dict[str, Any]:
-    """Play ``episodes`` and return the counts, rates and 95% intervals."""
+def _recording(
+    arena: Arena, record: Path, i: int, seed: int, contexts: dict[str, Any], meta: dict[str, Any]
+) -> RecordingWriter:
+    """Start the file of episode ``i`` (just reset with ``seed`` and ``contexts``)."""
+    rec = Recording(
+        arena.seed,
+        arena.config.to_dict(),
+        seed,
+        contexts,
+        decision_hash(arena.get_state()),
+        meta=meta,
+    )
+    return RecordingWriter(record / f"episode_{i:05d}_s{seed}{SUFFIX}", rec)
+
+
+def play(
+    blue: str,
+    red: str,
+    episodes: int,
+    seed: int,
+    *,
+    record: Path | None = None,
+    gif: Path | None = None,
+    **options: Any,
+) -> dict[str, Any]:
+    """Play ``episodes`` and return the counts, rates and 95% intervals.
+
+    ``record``: a directory to write every episode's recording to; ``gif``: a file to draw
+    the first episode in (one frame per decision).
+    """
     policy = None
     if blue in LEVEL_NAMES:
         arena = Arena(seed=seed, mode="bots", blue_level=blue, **options)
@@ -70,18 +108,38 @@ def play(blue: str, red: str, episodes: int, seed: int, **options: Any) -> dict[
         policy = load_policy(blue)
         arena = Arena(seed=seed, **(policy.options | options))
     outcomes: Counter[str] = Counter()
+    writer: RecordingWriter | None = None
     try:
         for i in range(episodes):
-            obs = arena.reset({"level": red}, seed=seed + i)
+            contexts = {"level": red}
+            obs = arena.reset(contexts, seed=seed + i)
             if policy is not None:
                 policy.reset()
+            if record is not None:
+                writer = _recording(
+                    arena, record, i, seed + i, contexts, {"blue": blue, "red": red}
+                )
+            frames = [arena.render()] if gif is not None and i == 0 else None
             done, info = False, {}
             while not done:
-                actions = (policy.act(obs, arena.get_avail_actions(), arena.get_state())
-                           if policy is not None else [])
-                obs, _, done, info = arena.step(actions)
+                actions = (
+                    policy.act(obs, arena.get_avail_actions(), arena.get_state())
+                    if policy is not None
+                    else []
+                )
+                obs, rewards, done, info = arena.step(actions)
+                if writer is not None:
+                    writer.decision(Decision.after(actions, arena.get_state(), rewards, done, info))
+                if frames is not None:
+                    frames.append(arena.render())
+            if writer is not None:
+                writer.close()
+            if frames is not None and gif is not None:
+                write_video(gif, frames)
             outcomes[str(info["winner"])] += 1
     finally:
+        if writer is not None:
+            writer.close()
         arena.close()
     return summarise(blue, red, outcomes, episodes, seed)
 
@@ -98,23 +156,41 @@ def summarise(blue: str, red: str, outcomes: Counter[str], n: int, seed: int) ->
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point."""
     parser = argparse.ArgumentParser(prog="neuronsmae-match", description=__doc__.split("\n")[0])
-    parser.add_argument("--blue", default="hard",
-                        help=f"bot level {LEVEL_NAMES} or a checkpoint path")
+    parser.add_argument(
+        "--blue", default="hard", help=f"bot level {LEVEL_NAMES} or a checkpoint path"
+    )
     parser.add_argument("--red", default="easy", choices=LEVEL_NAMES, help="red bot level")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="DIR",
+        help="write every episode's recording here (see neuronsmae-replay)",
+    )
+    parser.add_argument("--gif", type=Path, metavar="OUT", help="draw the first episode as a GIF")
     args = parser.parse_args(argv)
     if args.blue not in LEVEL_NAMES and not Path(args.blue).exists():
         parser.error(f"--blue must be one of {LEVEL_NAMES} or an existing checkpoint path")
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
-    result = play(args.blue, args.red, args.episodes, args.seed)
+    if args.gif is not None and args.gif.suffix.lower() != ".gif":
+        parser.error("--gif must name a .gif file")
+    try:
+        result = play(
+            args.blue, args.red, args.episodes, args.seed, record=args.record, gif=args.gif
+        )
+    except (NeuronsMAEError, OSError) as exc:
+        print(f"neuronsmae-match: {exc}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"blue={result['blue']} vs red={result['red']}: {args.episodes} episodes, "
-          f"seeds {args.seed}..{args.seed + args.episodes - 1}")
+    print(
+        f"blue={result['blue']} vs red={result['red']}: {args.episodes} episodes, "
+        f"seeds {args.seed}..{args.seed + args.episodes - 1}"
+    )
     for label, key in (("blue wins", "blue_win"), ("red wins", "red_win"), ("draws", "draw")):
         lo, hi = result[f"{key}_ci95"]
         print(f"  {label:9s} {result[f'{key}_rate']:.3f}  (95% CI {lo:.3f}-{hi:.3f})")

@@ -16,10 +16,11 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from types import FrameType
 
 import zenoh
+
 from neuronsmae.protocol.errors import MessageTooLargeError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_REQUEST_BYTES, ErrorReply, encode_reply, rpc_key
 from neuronsmae.protocol.transport import endpoint, server_config
@@ -104,9 +105,18 @@ def watch_parent(parent_pid: int, period: float = 0.25) -> None:
 class RpcServer:
     """Serves an :class:`ArenaService` on ``neuronsmae/<port>/rpc`` at ``tcp/host:port``."""
 
-    def __init__(self, service: ArenaService, host: str, port: int, stop: StopSignal) -> None:
+    def __init__(
+        self,
+        service: ArenaService,
+        host: str,
+        port: int,
+        stop: StopSignal,
+        routers: Sequence[str] = (),
+    ) -> None:
         self.service = service
         self.host, self.port = host, port
+        self.routers = tuple(routers)
+        """Zenoh routers to connect to as well, for clients that cannot reach host:port."""
         self.key = rpc_key(port)
         self._stop = stop
         self._session: zenoh.Session | None = None
@@ -114,7 +124,7 @@ class RpcServer:
 
     def __enter__(self) -> RpcServer:
         try:
-            self._session = zenoh.open(server_config(self.host, self.port))
+            self._session = zenoh.open(server_config(self.host, self.port, self.routers))
         except zenoh.ZError as exc:
             if "in use" in str(exc):
                 raise PortInUseError(f"port {self.port} on {self.host} is already in use") from exc

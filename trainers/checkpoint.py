@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import torch
+
 from neuronsmae.trainers.learner import AgentSpec, EnvSpec, QLearner
 
 CHECKPOINT_NAME = "checkpoint.pt"

@@ -1,6 +1,7 @@
 """``neuronsmae-train``: train IQL, VDN or QMIX blue agents against the rule-based red bot.
 
-Layers, later ones winning: the defaults of :class:`TrainConfig`, ``--config FILE`` (TOML or
+Layers, later ones winning: the defaults of :class:`TrainConfig`, ``--preset paper`` (the
+paper's hyper-parameters), ``--config FILE`` (TOML or
 JSON), ``--set key=value`` (repeatable), then the dedicated flags (``--alg``, ``--level``,
 ``--workers``, ...). With ``--resume`` the run directory's saved ``config.json`` replaces the
 defaults, so a resumed run keeps its settings unless told otherwise (e.g. a larger
@@ -23,11 +24,13 @@ from typing import Any
 from neuronsmae.trainers.config import (
     ENV_KINDS,
     LEVELS,
+    PRESETS,
     ConfigError,
     TrainConfig,
     field_docs,
     make_config,
     parse_overrides,
+    preset,
     read_config_file,
 )
 from neuronsmae.trainers.mixers import ALGORITHMS
@@ -51,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="paper's loop: one episode per worker per iteration",
     )
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--preset", choices=sorted(PRESETS), help="named settings (paper)")
     p.add_argument("--config", help="TOML or JSON file of config keys")
     p.add_argument(
         "--set",
@@ -73,7 +77,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     flags: dict[str, Any] = {k: getattr(args, k) for k in FLAG_KEYS if getattr(args, k) is not None}
     if args.quiet:
         flags["progress"] = False
-    layers = [read_config_file(args.config)] if args.config else []
+    layers = [preset(args.preset)] if args.preset else []
+    layers += [read_config_file(args.config)] if args.config else []
     layers += [parse_overrides(args.set), flags]
     base = None
     if args.resume:

@@ -50,8 +50,9 @@ class TrainConfig:
     """Seeds the networks, exploration, replay sampling and the training episodes."""
     episodes: int = 6000
     """Training episodes in total (a resumed run continues until this many)."""
-    max_minutes: float = 0.0
-    """Wall-clock budget of the training in minutes (0: none); the final evaluation follows."""
+    max_minutes: float = 25.0
+    """Wall-clock budget of the training in minutes (0: none); the final evaluation follows.
+    With the episode cap it keeps a default run within half an hour on a 2-core laptop."""
     out: str = ""
     """Run directory; empty means runs/<alg>_<level>_s<seed>."""
     # --- environment -------------------------------------------------------------------
@@ -73,18 +74,19 @@ class TrainConfig:
     max_worker_failures: int = 5
     """Consecutive failures after which a worker is given up instead of restarted."""
     # --- learning ----------------------------------------------------------------------
-    lr: float = 5e-4
-    """Adam learning rate (paper: 5e-4)."""
+    lr: float = 1e-3
+    """Adam learning rate (paper: 5e-4; 1e-3 learns faster in a few thousand episodes)."""
     gamma: float = 0.99
     """Discount (paper: 0.99)."""
     eps_start: float = 0.2
     """Initial exploration ε (paper: 0.2)."""
     eps_end: float = 0.05
     """Final exploration ε (paper: 0.05)."""
-    eps_anneal_episodes: int = 2000
+    eps_anneal_episodes: int = 1500
     """Training episodes over which ε falls linearly from eps_start to eps_end."""
-    target_update_interval: int = 5
-    """Gradient updates between hard target-network refreshes (paper: every 5 iterations)."""
+    target_update_interval: int = 20
+    """Gradient updates between hard target refreshes (20 = every 10 episodes at the default
+    2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100 episodes)."""
     grad_clip: float = 10.0
     """Gradient-norm clip (paper: 10)."""
     agent_hidden: int = 128
@@ -93,12 +95,13 @@ class TrainConfig:
     """QMIX mixing-layer width (paper: 32)."""
     hypernet_hidden: int = 64
     """QMIX hypernetwork hidden width."""
-    td_lambda: float = 0.0
-    """λ of the TD(λ) targets (0: one-step Q-learning targets)."""
+    td_lambda: float = 0.6
+    """λ of the TD(λ) targets (0: the paper's one-step targets; 0.6 as in PyMARL2)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
-    features: str = "raw"
-    """Agent inputs: raw (the observation as given) or relative (plus derived geometry)."""
+    features: str = "relative"
+    """Agent inputs: raw (the paper's: the observation as given) or relative (plus geometry
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
@@ -109,9 +112,9 @@ class TrainConfig:
     """Episodes per gradient update."""
     learning_starts: int = 64
     """Episodes in the buffer before learning begins."""
-    train_every: int = 2
+    train_every: int = 1
     """Asynchronous mode: episodes collected between training rounds."""
-    updates_per_round: int = 1
+    updates_per_round: int = 2
     """Gradient updates per training round (per iteration in synchronous mode)."""
     # --- evaluation and records -------------------------------------------------------
     eval_every: int = 500
@@ -166,6 +169,33 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""
         return dataclasses.asdict(self)
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {
+        "lr": 5e-4,
+        "td_lambda": 0.0,
+        "target_update_interval": 5,
+        "features": "raw",
+        "train_every": 1,
+        "updates_per_round": 1,
+        "eps_anneal_episodes": 2000,
+        "max_minutes": 0.0,
+        "episodes": 30_000,
+    },
+}
+"""Named layers applied before the config file: ``paper`` restores the paper's settings (Adam
+5e-4, one-step targets, targets refreshed every 5 updates, raw observations) where the
+defaults were tuned to learn within a laptop's half hour; 30 000 episodes is the paper's
+20 workers × 1501 iterations."""
+
+
+def preset(name: str) -> dict[str, Any]:
+    """The preset layer called ``name``; raise listing the valid ones."""
+    try:
+        return dict(PRESETS[name])
+    except KeyError:
+        raise ConfigError(f"unknown preset {name!r}; valid: {', '.join(sorted(PRESETS))}") from None
 
 
 def _check_choice(name: str, value: Any, valid: Iterable[Any]) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import torch
+
 from neuronsmae.trainers.agent import build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint

@@ -14,10 +14,11 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
+
 from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Batch
 from neuronsmae.trainers.mixers import make_mixer
-from torch import nn
 
 
 @dataclass(frozen=True)

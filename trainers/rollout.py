@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import torch
+
 from neuronsmae.protocol import ArenaAPI
 from neuronsmae.trainers.agent import build_inputs, epsilon_greedy
 from neuronsmae.trainers.buffer import Episode

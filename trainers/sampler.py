@@ -22,9 +22,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import ray
+from ray.exceptions import RayError
+
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
-from ray.exceptions import RayError
 
 log = logging.getLogger(__name__)
 

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import ray
 import torch
+
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
 from neuronsmae.trainers.checkpoint import (

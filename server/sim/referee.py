@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.sim.shots import fire
 

@@ -14,6 +14,7 @@ import math
 
 import numba as nb
 import numpy as np
+
 from neuronsmae.server.sim import field as F
 
 MIN_RANGE = 0.3

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from neuronsmae.server.sim import field as F
 
 _GROWN = None

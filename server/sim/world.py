@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pybullet as pb
+
 from neuronsmae.server.sim import field as F
 
 ROBOT_Z = F.ROBOT_HEIGHT / 2.0

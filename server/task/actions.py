@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from neuronsmae.protocol.errors import InvalidActionError
 
 V_MAX = 2.0

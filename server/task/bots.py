@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
 from neuronsmae.server.sim.field import obstacle_array
 from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, segment_blocked
 

@@ -33,6 +33,7 @@ import math
 
 import numba
 import numpy as np
+
 from neuronsmae.server.sim.field import SPAWN_OBSTACLE_MARGIN
 from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, point_in_grown_box, slab_clip
 

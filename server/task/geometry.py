@@ -21,6 +21,7 @@ import math
 
 import numba
 import numpy as np
+
 from neuronsmae.server.sim.field import (
     ARMOR_HEIGHT,
     FIELD_X,

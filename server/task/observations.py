@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from neuronsmae.server.sim import field as F
 
 LIDAR_OFFSET = 61

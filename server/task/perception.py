@@ -8,6 +8,7 @@ the bots.
 from __future__ import annotations
 
 import numpy as np
+
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.task.candidates import candidate_points
 from neuronsmae.server.task.geometry import (

@@ -41,8 +41,6 @@ ROBOT_SLOPE = 56.0
 """Further extra cost growing linearly towards the other robot's centre."""
 N_LANDMARKS = 8
 """ALT landmarks; more tighten the heuristic but cost a lookup each per push."""
-ACTIVE_LANDMARKS = 8
-"""Landmarks used per query: those giving the best bound at the start."""
 TIE_BREAK = 1.0 + 1e-3
 """Heuristic weight just above 1: among equal-f nodes prefer the one nearer the goal."""
 
@@ -255,10 +253,7 @@ def _astar(s, t, pen, land, rob, rb, nx, ny, fw, iw, gen, hk, hn):
     """A* from s to t with lazy deletion; True if t was reached (parents in ``_PAR``)."""
     tx, ty = t % nx, t // nx
     cap = _goal_penalty(t, pen, rob, rb, nx, ny, fw, iw, gen, hk, hn)
-    # Only the landmarks that bound the start best: most of the gain at a fraction of the cost.
-    score = np.maximum(land[t] - land[s], land[s] - pen[s] - land[t] + pen[t])
-    act = np.argsort(-score)[:ACTIVE_LANDMARKS]
-    land_t = land[t][act]
+    land_t = land[t].copy()
     back_t = land_t - pen[t]
     fw[_G, s], iw[_GST, s], iw[_PAR, s] = 0.0, gen, -1
     size = _push(hk, hn, 0, 0.0, s)
@@ -280,8 +275,8 @@ def _astar(s, t, pen, land, rob, rb, nx, ny, fw, iw, gen, hk, hn):
                 continue
             fw[_G, v], iw[_GST, v], iw[_PAR, v] = gv, gen, u
             h = abs(vx - tx) + abs(vy - ty) + (fw[_PD, v] if iw[_PST, v] == gen else cap)
-            for q in range(act.shape[0]):
-                lv = land[v, act[q]]
+            for q in range(land.shape[1]):
+                lv = land[v, q]
                 h = max(h, land_t[q] - lv, lv - pen[v] - back_t[q])
             size = _push(hk, hn, size, gv + TIE_BREAK * h, v)
     return False

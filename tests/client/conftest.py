@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
+
 from neuronsmae.client import ping
 from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key

@@ -15,6 +15,7 @@ import psutil
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from neuronsmae.client import RM, context_table, ping
 from neuronsmae.protocol.errors import (
     ERRORS,

@@ -12,6 +12,7 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+
 from neuronsmae.client import RM, CoopEnv
 from neuronsmae.client.gym_env import ENV_ID
 from neuronsmae.client.spaces import Layout

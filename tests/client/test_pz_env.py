@@ -9,11 +9,12 @@ from typing import Any
 import numpy as np
 import pytest
 from gymnasium import spaces
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.utils.conversions import parallel_to_aec
+
 from neuronsmae.client import RM, ArenaParallelEnv, parallel_env
 from neuronsmae.protocol.errors import InvalidActionError
 from neuronsmae.server import Arena
-from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
-from pettingzoo.utils.conversions import parallel_to_aec
 
 from .conftest import Server, same
 

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+
 from neuronsmae.protocol.codec import EXT_NDARRAY, EXT_SCALAR, decode, encode
 from neuronsmae.protocol.errors import (
     ERRORS,

@@ -6,6 +6,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+
 from neuronsmae.server import Arena
 
 FAR = [(0.6, 0.6, 0.0), (7.5, 0.6, np.pi)]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from neuronsmae.protocol.errors import InvalidActionError
 from neuronsmae.server import Arena
 

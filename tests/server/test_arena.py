@@ -8,10 +8,10 @@ import sys
 
 import numpy as np
 import pytest
+
 from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, ResetNeededError
 from neuronsmae.server import Arena
 from neuronsmae.server.sim import field as F
-
 from tests.server.conftest import still
 
 START = np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (7.4, 3.9, np.pi), (7.5, 0.6, np.pi)])

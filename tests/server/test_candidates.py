@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.task.candidates import _kept_samples, candidate_points
 from neuronsmae.server.task.geometry import (

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from neuronsmae.server.sim.chassis import GRAVITY, WHEEL_RADIUS, Chassis, ChassisParams
 
 DT = 0.02

@@ -7,6 +7,7 @@ import operator
 
 import numpy as np
 import pytest
+
 from neuronsmae.server import Arena
 
 SCENE = np.array([(1.0, 1.0, 0.5), (2.0, 3.5, -1.0), (6.0, 1.2, np.pi), (7.0, 3.6, 2.0)])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from neuronsmae.server import Arena
 
+from neuronsmae.server import Arena
 from tests.server.conftest import duel, still
 
 Y = 2.24  # the centre line: only low obstacles (B6, B8, B7) stand on it

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 import msgpack
 import numpy as np
 import pytest
+
 from neuronsmae.protocol.errors import ERRORS
 from neuronsmae.protocol.messages import (
     NOT_CONFIGURED,

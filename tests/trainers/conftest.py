@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from neuronsmae.trainers.buffer import Episode
 
 N_AGENTS, OBS, STATE, ACTIONS, LIMIT = 2, 5, 4, 3, 6

@@ -7,6 +7,7 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from neuronsmae.trainers.agent import (
     RNNAgent,
     build_inputs,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer, IncompleteEpisodeError
 
 from .conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode

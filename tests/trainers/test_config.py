@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from neuronsmae.trainers.cli import build_parser, config_from_args
 from neuronsmae.trainers.config import (
     ConfigError,
@@ -13,14 +14,20 @@ from neuronsmae.trainers.config import (
     field_docs,
     make_config,
     parse_overrides,
+    preset,
     read_config_file,
 )
 
 
-def test_defaults_are_the_papers_hyper_parameters() -> None:
-    cfg = TrainConfig()
+def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
+    cfg = make_config(preset("paper"))
     assert (cfg.lr, cfg.gamma, cfg.eps_start, cfg.eps_end) == (5e-4, 0.99, 0.2, 0.05)
     assert (cfg.grad_clip, cfg.agent_hidden, cfg.mixer_embed) == (10.0, 128, 32)
+    assert (cfg.target_update_interval, cfg.td_lambda, cfg.features) == (5, 0.0, "raw")
+    args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
+    assert config_from_args(args).lr == 0.01  # --set still wins over the preset
+    with pytest.raises(ConfigError, match="valid: paper"):
+        preset("fast")
 
 
 def test_every_field_has_a_docstring() -> None:

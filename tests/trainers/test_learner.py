@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec, lambda_returns
 

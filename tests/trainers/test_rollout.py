@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker

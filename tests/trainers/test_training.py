@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import ray
 import torch
+
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint
@@ -25,6 +26,7 @@ pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
 TINY = [
     "eval_episodes=2",
+    "final_eval_episodes=2",
     "batch_size=4",
     "learning_starts=4",
     "worker_cpus=0.5",

@@ -1,0 +1,327 @@
+"""The fleet supervisor: N server subprocesses on consecutive ports, pinged and restarted.
+
+Kept apart from the ``neuronsmae-serve`` command line (:mod:`neuronsmae.server.fleet`) so a
+test or another launcher can drive :class:`Fleet` directly: ``start`` brings the servers
+up, ``check`` is one supervision pass (restart what died, ping what runs), ``stop`` ends
+them all. Servers are fresh interpreters (``python -m neuronsmae.server``), never forks,
+because this process holds Zenoh sessions for its pings.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import IO
+
+from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.server.probe import Health, Probe
+
+log = logging.getLogger("neuronsmae.serve")
+
+STARTUP_TIMEOUT = 180.0
+"""Seconds a server may take to answer its first ping (imports, JIT cache, arena build)."""
+STOP_TIMEOUT = 10.0
+MAX_BACKOFF = 30.0
+BAD_ARGUMENTS = 2
+"""The server's exit status for a taken port or bad arguments: restarting cannot help."""
+
+
+@dataclass(frozen=True)
+class FleetSpec:
+    """What to run: ``count`` servers from ``base_port``, seeds from ``seed``."""
+
+    base_port: int = 10000
+    count: int = 1
+    seed: int = 1234
+    host: str = "127.0.0.1"
+    time_scale: float = 100.0
+    lease: float = 60.0
+    routers: tuple[str, ...] = ()
+    log_level: str = "WARNING"
+
+    def ports(self) -> list[int]:
+        return [self.base_port + i for i in range(self.count)]
+
+
+def state_path(base_port: int) -> Path:
+    """Where the fleet on ``base_port`` records its pids (``$NEURONSMAE_STATE_DIR`` or tmp)."""
+    root = os.environ.get("NEURONSMAE_STATE_DIR") or tempfile.gettempdir()
+    return Path(root) / f"neuronsmae-serve-{base_port}.json"
+
+
+@dataclass
+class Member:
+    """One server of the fleet and what the supervisor knows about it."""
+
+    index: int
+    port: int
+    seed: int
+    proc: subprocess.Popen[bytes] | None = None
+    starts: int = 0
+    failures: int = 0
+    """Deaths in a row without answering a ping in between (drives the backoff)."""
+    restart_at: float | None = None
+    """When a dead server is due to start again (None: not dead, or not noticed yet)."""
+    missed: int = 0
+    answered: bool = False
+    last: Health | None = field(default=None, repr=False)
+
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid if self.proc is not None else None
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+
+class Fleet:
+    """Starts, watches, restarts and stops the servers of one :class:`FleetSpec`."""
+
+    def __init__(
+        self,
+        spec: FleetSpec,
+        log_dir: Path | None = None,
+        state_file: Path | None = None,
+        ping_timeout: float = 1.0,
+        max_missed: int = 0,
+    ) -> None:
+        self.spec = spec
+        default_logs = Path(tempfile.gettempdir()) / f"neuronsmae-serve-{spec.base_port}"
+        self.log_dir = log_dir or default_logs
+        self.state_file = state_file or state_path(spec.base_port)
+        self.max_missed = max_missed
+        self.members = [Member(i, port, spec.seed + i) for i, port in enumerate(spec.ports())]
+        self.probes = [
+            Probe(spec.host, m.port, spec.routers[0] if spec.routers else None, ping_timeout)
+            for m in self.members
+        ]
+        self.restarts = 0
+
+    # ---- lifecycle ---------------------------------------------------------------------
+
+    def __enter__(self) -> Fleet:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self, timeout: float = STARTUP_TIMEOUT, stop: StopFlag | None = None) -> None:
+        """Start server 0, wait for it (it fills the JIT cache), then start the rest.
+
+        Raises :class:`FleetStartError` when a server exits with the status of a taken port
+        or bad arguments; a server that is merely slow is left to :meth:`check`.
+        """
+        first, rest = self.members[:1], self.members[1:]
+        for group in (first, rest):
+            if stop is not None and stop.set:
+                return
+            for member in group:
+                self._spawn(member)
+            self._wait_ready(group, timeout, stop)
+
+    def _wait_ready(self, group: list[Member], timeout: float, stop: StopFlag | None) -> None:
+        deadline = time.monotonic() + timeout
+        waiting = list(group)
+        while waiting and time.monotonic() < deadline and not (stop is not None and stop.set):
+            for member in list(waiting):
+                if not member.alive():
+                    code = member.proc.returncode if member.proc is not None else None
+                    raise FleetStartError(
+                        f"server on port {member.port} exited with status {code}:\n"
+                        f"{self.log_tail(member)}"
+                    )
+                if self._ping(member).up:
+                    waiting.remove(member)
+            time.sleep(0.1 if waiting else 0.0)
+        for member in waiting:
+            log.warning("server on port %d is not answering yet", member.port)
+
+    def stop(self) -> None:
+        """SIGTERM every server, SIGKILL those still there after ``STOP_TIMEOUT``."""
+        running = [m for m in self.members if m.alive()]
+        for member in running:
+            assert member.proc is not None
+            member.proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + STOP_TIMEOUT
+        for member in running:
+            assert member.proc is not None
+            try:
+                member.proc.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("server on port %d ignored SIGTERM; killing it", member.port)
+                member.proc.kill()
+                member.proc.wait()
+        for probe in self.probes:
+            probe.close()
+        self._write_state(stopped=True)
+
+    # ---- supervision -------------------------------------------------------------------
+
+    def check(self) -> list[Health]:
+        """One pass: restart what died (when its backoff allows), ping what runs."""
+        now = time.monotonic()
+        out = []
+        for member in self.members:
+            if not member.alive():
+                out.append(self._dead(member, now))
+                continue
+            health = self._ping(member)
+            if not health.up and member.answered:
+                member.missed += 1
+                if self.max_missed and member.missed >= self.max_missed:
+                    log.warning(
+                        "server on port %d missed %d pings; restarting it",
+                        member.port,
+                        member.missed,
+                    )
+                    self._kill(member)
+                    self._spawn(member)
+                    self.restarts += 1
+            out.append(health)
+        return out
+
+    def _dead(self, member: Member, now: float) -> Health:
+        """Schedule a dead server's restart (later each time it dies unheard), or do it."""
+        code = member.proc.returncode if member.proc is not None else None
+        if member.restart_at is None:
+            member.failures += 1
+            delay = min(MAX_BACKOFF, 0.5 * 2 ** (member.failures - 1))
+            member.restart_at = now + delay
+            log.warning(
+                "server on port %d (pid %s) exited with status %s; restarting in %.1f s\n%s",
+                member.port,
+                member.pid,
+                code,
+                delay,
+                self.log_tail(member, 600),
+            )
+        if now >= member.restart_at:
+            self._spawn(member)
+            self.restarts += 1
+        return Health(member.port, False, error=f"exited with status {code}; restarting")
+
+    def _ping(self, member: Member) -> Health:
+        health = self.probes[member.index].ping()
+        member.last = health
+        if health.up:
+            member.answered, member.missed, member.failures = True, 0, 0
+        return health
+
+    def run(self, stop: StopFlag, interval: float = 2.0) -> None:
+        """Supervise until ``stop`` is set, checking every ``interval`` seconds."""
+        while not stop.set:
+            self.check()
+            stop.sleep(interval)
+
+    # ---- processes ---------------------------------------------------------------------
+
+    def command(self, member: Member) -> list[str]:
+        """The server's command line (``--watch-parent``: no orphans if we are killed)."""
+        spec = self.spec
+        cmd = [
+            sys.executable, "-m", "neuronsmae.server",
+            "--port", str(member.port), "--seed", str(member.seed), "--host", spec.host,
+            "--time-scale", str(spec.time_scale), "--lease", str(spec.lease),
+            "--log-level", spec.log_level, "--watch-parent", str(os.getpid()),
+        ]  # fmt: skip
+        for router in spec.routers:
+            cmd += ["--router", router]
+        return cmd
+
+    def log_file(self, member: Member) -> Path:
+        return self.log_dir / f"server-{member.port}.log"
+
+    def log_tail(self, member: Member, limit: int = 2000) -> str:
+        """The end of the server's log, for messages about why it stopped."""
+        try:
+            with self.log_file(member).open("rb") as f:
+                f.seek(0, os.SEEK_END)
+                f.seek(max(0, f.tell() - limit))
+                return f.read().decode(errors="replace").strip()
+        except OSError:
+            return ""
+
+    def _spawn(self, member: Member) -> None:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        with self.log_file(member).open("ab") as logf:
+            _stamp(logf, f"start {member.starts + 1} of the server on port {member.port}")
+            # A session of its own: a Ctrl-C meant for us reaches the servers only through
+            # our orderly stop, never half-way through our own shutdown.
+            member.proc = subprocess.Popen(
+                self.command(member),
+                stdin=subprocess.DEVNULL,
+                stdout=logf,
+                stderr=logf,
+                start_new_session=True,
+            )
+        member.starts += 1
+        member.restart_at, member.missed, member.answered = None, 0, False
+        self.probes[member.index].close()
+        log.info("started server on port %d (pid %d)", member.port, member.proc.pid)
+        self._write_state()
+
+    def _kill(self, member: Member) -> None:
+        if member.proc is not None and member.proc.poll() is None:
+            member.proc.kill()
+            member.proc.wait()
+
+    def _write_state(self, stopped: bool = False) -> None:
+        state = {
+            "fleet_pid": None if stopped else os.getpid(),
+            "spec": asdict(self.spec),
+            "servers": [
+                {
+                    "port": m.port,
+                    "seed": m.seed,
+                    "pid": None if stopped else m.pid,
+                    "starts": m.starts,
+                    "log": str(self.log_file(m)),
+                }
+                for m in self.members
+            ],
+        }
+        tmp = self.state_file.with_suffix(".tmp")
+        tmp.write_text(json.dumps(state, indent=1))
+        tmp.replace(self.state_file)  # atomic: ``status`` never reads half a file
+
+
+class FleetStartError(NeuronsMAEError):
+    """A server of the fleet exited during startup (its port is taken, or bad arguments)."""
+
+    code = "fleet_start"
+
+
+class StopFlag:
+    """SIGINT/SIGTERM set a flag that the loops poll, so no signal lands mid-restart."""
+
+    def __init__(self) -> None:
+        self.set = False
+
+    def install(self) -> None:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._handler)
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        log.info("received %s; stopping the servers", signal.Signals(signum).name)
+        self.set = True
+
+    def sleep(self, seconds: float) -> None:
+        """Sleep up to ``seconds``, waking within 0.1 s of a stop request."""
+        end = time.monotonic() + seconds
+        while not self.set and (left := end - time.monotonic()) > 0:
+            time.sleep(min(0.1, left))
+
+
+def _stamp(logf: IO[bytes], text: str) -> None:
+    logf.write(f"--- {time.strftime('%Y-%m-%d %H:%M:%S')} {text} ---\n".encode())
+    logf.flush()

@@ -1,0 +1,102 @@
+"""Frames to a GIF (core dependencies: imageio and Pillow) or an MP4 (the ``video`` extra).
+
+Why GIF by default: it needs nothing beyond the core dependencies and plays inline in a
+README, an issue or a notebook. MP4 is smaller and sharper but needs an ffmpeg binary,
+which ``imageio-ffmpeg`` ships: ``pip install 'neuronsmae[video]'``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from neuronsmae.protocol.errors import InvalidOptionError, MissingDependencyError
+
+DEFAULT_FPS = 5.0
+"""Frames per second: one frame per 0.4 s decision at 5 fps plays at twice real time."""
+
+
+def prepare(frames: Sequence[np.ndarray], every: int = 1, scale: float = 1.0) -> list[np.ndarray]:
+    """Every ``every``-th frame (the last one always kept: it shows the result), resized by
+    ``scale``."""
+    if every < 1 or not 0.05 <= scale <= 4.0:
+        raise InvalidOptionError(f"every must be ≥ 1 and scale in [0.05, 4]; got {every}, {scale}")
+    if not frames:
+        raise InvalidOptionError("no frames to write")
+    keep = list(range(0, len(frames), every))
+    if keep[-1] != len(frames) - 1:
+        keep.append(len(frames) - 1)
+    out = []
+    for i in keep:
+        frame = np.asarray(frames[i], dtype=np.uint8)
+        if scale != 1.0:
+            h, w = frame.shape[:2]
+            size = (max(2, round(w * scale)), max(2, round(h * scale)))
+            frame = np.asarray(Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS))
+        out.append(frame)
+    return out
+
+
+def write_gif(path: str | Path, frames: Sequence[np.ndarray], fps: float = DEFAULT_FPS) -> Path:
+    """Write an endlessly looping GIF; return its path."""
+    import imageio.v3 as iio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    iio.imwrite(
+        path,
+        np.stack(frames),
+        extension=".gif",
+        plugin="pillow",
+        duration=round(1000 / fps),
+        loop=0,
+    )
+    return path
+
+
+def write_mp4(path: str | Path, frames: Sequence[np.ndarray], fps: float = DEFAULT_FPS) -> Path:
+    """Write an H.264 MP4 (needs imageio-ffmpeg); return its path."""
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        raise MissingDependencyError(
+            "writing MP4 needs imageio-ffmpeg: pip install 'neuronsmae[video]' "
+            "(GIF works without it)"
+        )
+    import imageio.v2 as iio2
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with iio2.get_writer(
+        path,
+        format="FFMPEG",
+        mode="I",
+        fps=fps,
+        codec="libx264",
+        pixelformat="yuv420p",
+        macro_block_size=1,
+    ) as writer:
+        for frame in frames:
+            h, w = frame.shape[:2]  # yuv420p needs even sides: pad by one row/column
+            writer.append_data(np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge"))
+    return path
+
+
+def write_video(
+    path: str | Path,
+    frames: Sequence[np.ndarray],
+    fps: float = DEFAULT_FPS,
+    every: int = 1,
+    scale: float = 1.0,
+) -> Path:
+    """GIF or MP4 by the file's suffix, after :func:`prepare`."""
+    path = Path(path)
+    kept = prepare(frames, every, scale)
+    suffix = path.suffix.lower()
+    if suffix == ".gif":
+        return write_gif(path, kept, fps)
+    if suffix == ".mp4":
+        return write_mp4(path, kept, fps)
+    raise InvalidOptionError(f"video {path}: the name must end in .gif or .mp4")

@@ -1,0 +1,224 @@
+"""``neuronsmae-plot``: learning curves of training runs, with the paper's results to compare.
+
+    neuronsmae-plot RUN_DIR... [--out curves.png] [--source eval|train|both]
+
+Each ``RUN_DIR`` is what ``neuronsmae-train`` wrote (``config.json``, ``train.csv``,
+``eval.csv``; see :mod:`neuronsmae.trainers.records`), or a directory holding such run
+directories. Runs with the same algorithm and bot level form one curve: the mean across
+them (seeds) as a line and their min–max spread as a band, win rate and return against
+environment steps. The greedy evaluations (``eval.csv``) are the measure the paper reports,
+so where the level is known its final win rate against that bot is drawn as a dotted line.
+
+It reads only the files, never a checkpoint, so it plots runs still in progress and runs
+copied from another machine alike; matplotlib comes with the ``train`` extra.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neuronsmae.protocol.errors import MissingDependencyError, NeuronsMAEError
+
+PAPER_WIN_RATE: dict[str, dict[str, float]] = {
+    "easy": {"iql": 0.75, "vdn": 0.93, "qmix": 0.89},
+    "middle": {"iql": 0.48, "vdn": 0.62, "qmix": 0.57},
+    "hard": {"iql": 0.23, "vdn": 0.41, "qmix": 0.34},
+}
+"""The paper's win rates against the bot, 2 v 2, abstract actions (level → algorithm)."""
+COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+GRID_POINTS = 200
+"""Environment-step grid that runs are interpolated on before averaging."""
+
+
+class RunDirError(NeuronsMAEError, ValueError):
+    """A path is not a run directory, or holds nothing to plot."""
+
+
+@dataclass
+class Run:
+    """One run directory's curves (columns of its CSV files as float arrays)."""
+
+    path: Path
+    alg: str
+    level: str
+    seed: Any
+    train: dict[str, np.ndarray] = field(default_factory=dict)
+    eval: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def group(self) -> tuple[str, str]:
+        return self.alg, self.level
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent."""
+    if not path.is_file():
+        return {}
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return {}
+    return {key: np.array([_num(r.get(key)) for r in rows]) for key in rows[0]}
+
+
+def _num(text: str | None) -> float:
+    try:
+        return float(text) if text not in (None, "") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def find_runs(paths: Iterable[str | Path]) -> list[Path]:
+    """Run directories named by ``paths``: each one, or the run directories inside it."""
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if (p / "config.json").is_file():
+            found.append(p)
+        elif p.is_dir() and (inner := sorted(c.parent for c in p.glob("*/config.json"))):
+            found += inner
+        else:
+            raise RunDirError(f"{p} is not a run directory (no config.json) and holds none")
+    return found
+
+
+def load_run(path: Path) -> Run:
+    """Read one run directory."""
+    try:
+        config = json.loads((path / "config.json").read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise RunDirError(f"{path}/config.json is unreadable: {exc}") from exc
+    return Run(
+        path=path,
+        alg=str(config.get("alg", "?")),
+        level=str(config.get("level", "?")),
+        seed=config.get("seed"),
+        train=read_csv(path / "train.csv"),
+        eval=read_csv(path / "eval.csv"),
+    )
+
+
+def mean_and_spread(
+    curves: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, mean, low, high)`` of several ``(x, y)`` curves on a common grid.
+
+    Each curve is interpolated only inside its own x range, so a shorter run stops
+    contributing where it ends instead of being extrapolated; a single point stays a point.
+    """
+    curves = [(x[np.isfinite(y)], y[np.isfinite(y)]) for x, y in curves]
+    curves = [(x, y) for x, y in curves if x.size]
+    if not curves:
+        return (np.empty(0),) * 4
+    lo = min(float(x.min()) for x, _ in curves)
+    hi = max(float(x.max()) for x, _ in curves)
+    grid = np.linspace(lo, hi, GRID_POINTS) if hi > lo else np.array([lo])
+    ys = np.full((len(curves), grid.size), np.nan)
+    for row, (x, y) in enumerate(curves):
+        order = np.argsort(x, kind="stable")
+        inside = (grid >= x.min()) & (grid <= x.max())
+        ys[row, inside] = np.interp(grid[inside], x[order], y[order])
+    keep = np.isfinite(ys).any(axis=0)
+    ys, grid = ys[:, keep], grid[keep]
+    return grid, np.nanmean(ys, axis=0), np.nanmin(ys, axis=0), np.nanmax(ys, axis=0)
+
+
+SERIES = {
+    "eval": ("eval", "win_rate", "mean_return"),
+    "train": ("train", "train_win_rate", "train_return"),
+}
+"""Source → (attribute of Run, win-rate column, return column)."""
+
+
+def plot_runs(runs: Sequence[Run], out: Path, source: str = "both", title: str = "") -> Path:
+    """Draw win rate and return against environment steps; write a PNG; return its path."""
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:
+        raise MissingDependencyError(
+            "neuronsmae-plot needs matplotlib: pip install 'neuronsmae[train]'"
+        ) from exc
+    groups: dict[tuple[str, str], list[Run]] = {}
+    for run in runs:
+        groups.setdefault(run.group, []).append(run)
+    fig = Figure(figsize=(11, 4.2), dpi=100)
+    FigureCanvasAgg(fig)
+    ax_win, ax_ret = fig.subplots(1, 2)
+    sources = ("eval", "train") if source == "both" else (source,)
+    drew = False
+    for color, ((alg, level), members) in zip(COLORS * 8, sorted(groups.items()), strict=False):
+        name = f"{alg.upper()} vs {level} (n={len(members)})"
+        for src in sources:
+            attr, win_col, ret_col = SERIES[src]
+            style = {"eval": dict(lw=2.0, marker="o", ms=3), "train": dict(lw=1.0, alpha=0.6)}[src]
+            for ax, col in ((ax_win, win_col), (ax_ret, ret_col)):
+                curves = [
+                    (getattr(r, attr)["env_steps"], getattr(r, attr)[col])
+                    for r in members
+                    if col in getattr(r, attr) and "env_steps" in getattr(r, attr)
+                ]
+                x, mean, low, high = mean_and_spread(curves)
+                if not x.size:
+                    continue
+                drew = True
+                label = f"{name}, {'greedy eval' if src == 'eval' else 'training'}"
+                ax.plot(x, mean, color=color, label=label, **style)
+                if len(curves) > 1:
+                    ax.fill_between(
+                        x, low, high, color=color, alpha=0.15 if src == "eval" else 0.08
+                    )
+        paper = PAPER_WIN_RATE.get(level, {}).get(alg.lower())
+        if paper is not None:
+            ax_win.axhline(
+                paper, color=color, ls=":", lw=1.5, label=f"paper {alg.upper()} vs {level}"
+            )
+    if not drew:
+        raise RunDirError("the runs have no rows in train.csv or eval.csv yet: nothing to plot")
+    ax_win.set(xlabel="environment steps", ylabel="win rate vs bot", ylim=(-0.02, 1.02))
+    ax_ret.set(xlabel="environment steps", ylabel="episode return (blue team)")
+    for ax in (ax_win, ax_ret):
+        ax.grid(alpha=0.3)
+    ax_win.legend(fontsize=7, loc="best")
+    fig.suptitle(title or "Learning curves (line: mean over runs, band: min-max)", fontsize=10)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, format="png")
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console entry point; returns the exit status."""
+    p = argparse.ArgumentParser(prog="neuronsmae-plot", description=__doc__.split("\n")[0])
+    p.add_argument("runs", nargs="+", help="run directories, or directories of them")
+    p.add_argument("--out", type=Path, default=Path("curves.png"), help="PNG to write")
+    p.add_argument(
+        "--source",
+        choices=("eval", "train", "both"),
+        default="both",
+        help="greedy evaluations, training episodes, or both (both)",
+    )
+    p.add_argument("--title", default="", help="figure title")
+    args = p.parse_args(argv)
+    try:
+        runs = [load_run(path) for path in find_runs(args.runs)]
+        out = plot_runs(runs, args.out, args.source, args.title)
+    except (NeuronsMAEError, OSError) as exc:
+        print(f"neuronsmae-plot: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} ({len(runs)} run{'s' if len(runs) != 1 else ''})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
