@@ -157,7 +157,7 @@ class Recorder(ArenaAPI):
         return self.env.render()
 
     def close(self) -> None:
-        """Close the current file, then the wrapped arena."""
+        # The current file first (kept, cut short), then the wrapped arena.
         self._finish()
         self.env.close()
 

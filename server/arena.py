@@ -63,7 +63,7 @@ class Arena(ArenaAPI):
         self.mates_of = [self._mates(i) for i in range(self.n)]
         self.enemies_of = [np.flatnonzero(self.team != self.team[i]) for i in range(self.n)]
         self.agents = self._controlled(cfg.mode)
-        self.world = World(self.n)
+        self.world = World(self.n, gui=cfg.gui, n_blue=cfg.n_blue)
         self.chassis = Chassis(self.n)
         self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
         self.planner = Planner(resolution=cfg.planner_resolution)

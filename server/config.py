@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -66,6 +68,9 @@ class ArenaConfig:
     """"random" (the released build) or "corners" (the RMUA birth areas)."""
     zones: bool = False
     """Enable the RMUA bonus/penalty zones (the released build had them do nothing)."""
+    gui: bool = False
+    """Show PyBullet's own 3-D window of this arena (needs a display; one per process).
+    The physics is identical to headless; ``render()`` stays the top-down image."""
     hit_mode: str = "expected"
     """"expected" damage per firing step, or "sampled" hits with that probability."""
     clip_actions: bool = False
@@ -101,6 +106,10 @@ class ArenaConfig:
             raise InvalidOptionError(
                 f"mode='competitive' needs equal teams (one observation and action layout for "
                 f"every agent); got n_blue={self.n_blue}, n_red={self.n_red}"
+            )
+        if self.gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+            raise InvalidOptionError(
+                "option gui=True needs a display, and DISPLAY is not set (use render() instead)"
             )
         if not (self.vector_obs or self.lidar):
             raise InvalidOptionError("options vector_obs and lidar are both off: enable one")

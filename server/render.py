@@ -37,6 +37,16 @@ ZONE_RGB = (250, 215, 120)
 SHOT_RGB = (255, 140, 0)
 LIDAR_RGB = {0: (170, 200, 245), 1: (245, 185, 185)}
 """Pale team colours: beams sit under everything else and must not hide it."""
+ZONE_EFFECTS = {
+    "hp_blue": ((190, 215, 250), "+HP"),
+    "hp_red": ((250, 200, 200), "+HP"),
+    "ammo_blue": ((190, 215, 250), "+AMMO"),
+    "ammo_red": ((250, 200, 200), "+AMMO"),
+    "no_shoot": ((215, 215, 215), "NO SHOOT"),
+    "no_move": ((215, 215, 215), "NO MOVE"),
+}
+"""Fill and label of a zone whose effect (``zones`` option) is still to be triggered; a
+spent zone shows only its outline."""
 
 
 @functools.cache
@@ -134,6 +144,30 @@ def _lidar(draw: ImageDraw.ImageDraw, arena: Arena) -> None:
         draw.line(pts.ravel().tolist(), fill=LIDAR_RGB[int(arena.team[i])])
 
 
+def _zones(draw: ImageDraw.ImageDraw, arena: Arena) -> None:
+    """The zone effects still waiting to be triggered, filled in their team's pale colour."""
+    zones = getattr(arena, "zones", None)
+    if zones is None:
+        return
+    zx, zy = F.ZONE_SIZE_RMUA
+    for name, effect in zones.state.effects.items():
+        rgb, label = ZONE_EFFECTS.get(effect, ((215, 215, 215), effect))
+        cx, cy = F.ZONES[name]
+        draw.polygon(_box_corners(cx, cy, zx / 2, zy / 2, 0.0), fill=rgb, outline=ZONE_RGB)
+        px, py = to_px(cx, cy)
+        w = draw.textlength(label, font=_font())
+        draw.text((px - w / 2, py - 5), label, fill=(0, 0, 0), font=_font())
+
+
+def _penalties(arena: Arena, i: int) -> str:
+    """ " [no shoot]" / " [no move]" while robot ``i`` serves a zone penalty, else ""."""
+    zones = getattr(arena, "zones", None)
+    if zones is None:
+        return ""
+    marks = (("no shoot", zones.silenced(arena.t)), ("no move", zones.frozen(arena.t)))
+    return "".join(f" [{name}]" for name, now in marks if now[i])
+
+
 def _scoreboard(arena: Arena) -> str:
     """Clock, decision and each team's HP, damage dealt and kills (the RMUA score)."""
     ref, nb = arena.referee, arena.n_blue
@@ -158,6 +192,7 @@ def render_scene(arena: Arena) -> np.ndarray:
     """The arena's current scene as an (H, W, 3) uint8 array."""
     img = _background().copy()
     draw = ImageDraw.Draw(img)
+    _zones(draw, arena)
     if arena.config.lidar:
         _lidar(draw, arena)
     ref = arena.referee
@@ -181,6 +216,7 @@ def render_scene(arena: Arena) -> np.ndarray:
             ref.bullets[i] / F.START_BULLETS,
         )
         px, py = to_px(*poses[i, :2])
-        draw.text((px + 32, py - 44), arena.agent_name(i), fill=(0, 0, 0), font=_font())
+        label = arena.agent_name(i) + _penalties(arena, i)
+        draw.text((px + 32, py - 44), label, fill=(0, 0, 0), font=_font())
     draw.text((MARGIN, 8), _scoreboard(arena), fill=(0, 0, 0), font=_font())
     return np.asarray(img, dtype=np.uint8)

@@ -32,7 +32,7 @@ from neuronsmae.protocol.errors import (
 )
 from neuronsmae.protocol.recording import Recording, decision_hash, read_recording
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.video import DEFAULT_FPS, write_video
+from neuronsmae.server.video import DEFAULT_FPS, check_writable, write_video
 
 
 @dataclass
@@ -118,6 +118,9 @@ def _parser() -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Replay, write the videos; return the summary (raises on any failure)."""
+    for out in (args.gif, args.mp4):
+        if out is not None:
+            check_writable(out)
     rec = read_recording(args.file)
     result = replay(rec, render=bool(args.gif or args.mp4))
     summary: dict[str, Any] = {

@@ -24,6 +24,7 @@ from typing import IO
 
 from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.server.probe import Health, Probe
+from neuronsmae.server.rpc import PortInUseError, check_port
 
 log = logging.getLogger("neuronsmae.serve")
 
@@ -118,9 +119,15 @@ class Fleet:
     def start(self, timeout: float = STARTUP_TIMEOUT, stop: StopFlag | None = None) -> None:
         """Start server 0, wait for it (it fills the JIT cache), then start the rest.
 
-        Raises :class:`FleetStartError` when a server exits with the status of a taken port
-        or bad arguments; a server that is merely slow is left to :meth:`check`.
+        Raises :class:`FleetStartError` when a port is taken or a server exits while
+        starting; a server that is merely slow is left to :meth:`check`.
         """
+        for member in self.members:  # else another server's pings would pass for ours
+            try:
+                check_port(self.spec.host, member.port)
+            except PortInUseError as exc:
+                msg = f"{exc}; stop what uses it or pick another --base-port"
+                raise FleetStartError(msg) from exc
         first, rest = self.members[:1], self.members[1:]
         for group in (first, rest):
             if stop is not None and stop.set:

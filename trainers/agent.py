@@ -57,12 +57,30 @@ class RNNAgent(nn.Module):
     batch; H is ``hidden_dim``.
     """
 
-    def __init__(self, input_dim: int, n_actions: int, hidden_dim: int = 128) -> None:
+    def __init__(
+        self,
+        input_dim: int,
+        n_actions: int,
+        hidden_dim: int = 128,
+        action_index: torch.Tensor | None = None,
+        head_hidden: int = 64,
+    ) -> None:
         super().__init__()
         self.hidden_dim = hidden_dim
         self.fc1 = nn.Linear(input_dim, hidden_dim)
         self.rnn = nn.GRU(hidden_dim, hidden_dim, batch_first=True)
         self.fc2 = nn.Linear(hidden_dim, n_actions)
+        self.point_head: nn.Module | None = None
+        if action_index is not None:
+            # ``action_index [A, F]``: which input columns describe action a's target and
+            # point. One small MLP scores every action from (GRU output, those columns), so
+            # what it learns about one candidate point transfers to all eight.
+            self.register_buffer("action_index", action_index.long(), persistent=False)
+            self.point_head = nn.Sequential(
+                nn.Linear(hidden_dim + action_index.shape[1], head_hidden),
+                nn.ReLU(),
+                nn.Linear(head_hidden, 1),
+            )
 
     def initial_hidden(self, batch: int) -> torch.Tensor:
         """A zero hidden state ``[1, batch, H]`` for the start of an episode."""
@@ -74,7 +92,12 @@ class RNNAgent(nn.Module):
         """Run ``T`` steps; return the Q-values ``[B, T, A]`` and the last hidden state."""
         x = F.relu(self.fc1(inputs))
         out, hidden = self.rnn(x, hidden)
-        return self.fc2(out), hidden
+        q = self.fc2(out)
+        if self.point_head is not None:
+            per_action = inputs[..., self.action_index]  # [B, T, A, F]
+            h = out.unsqueeze(-2).expand(*per_action.shape[:-1], out.shape[-1])
+            q = q + self.point_head(torch.cat([h, per_action], dim=-1)).squeeze(-1)
+        return q, hidden
 
 
 def masked_greedy(q: torch.Tensor, avail: torch.Tensor) -> torch.Tensor:

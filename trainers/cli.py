@@ -38,7 +38,8 @@ from neuronsmae.trainers.mixers import ALGORITHMS
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line; every flag defaults to None so only given flags override."""
-    p = argparse.ArgumentParser(prog="neuronsmae-train", description=__doc__.split("\n")[0])
+    summary = __doc__.split("\n")[0].replace("``", "")
+    p = argparse.ArgumentParser(prog="neuronsmae-train", description=summary)
     p.add_argument("--alg", choices=sorted(ALGORITHMS), help="learning algorithm (mixer)")
     p.add_argument("--level", choices=LEVELS, help="opponent bot level")
     p.add_argument("--workers", type=int, help="rollout workers (default: cores - 1)")

@@ -77,6 +77,38 @@ def relative(obs: np.ndarray) -> np.ndarray:
     return np.concatenate(cols, axis=-1).astype(np.float32)
 
 
+def action_feature_index(features: str, n_actions: int) -> np.ndarray:
+    """Columns of the ``relative`` features that describe each abstract action: ``[8, 17]``.
+
+    Action ``a`` drives to point ``a % 4`` of enemy ``a // 4``; its row lists that point's
+    (x, y), the enemy's pose, HP and bullets, the enemy's 6 relative features and the
+    point's 4. The ``points`` Q head scores every action from its row.
+    """
+    if features != "relative" or n_actions != N_ENEMY * K:
+        raise UnknownFeaturesError(
+            f"the 'points' head needs features='relative' and {N_ENEMY * K} abstract actions, "
+            f"got features={features!r}, n_actions={n_actions}"
+        )
+    rows = []
+    for a in range(n_actions):
+        j, k = divmod(a, K)
+        base = LAYOUT_37 + 22 * j
+        rows.append(
+            [
+                12 + 2 * (K * j + k),
+                13 + 2 * (K * j + k),
+                6 + 3 * j,
+                7 + 3 * j,
+                8 + 3 * j,
+                31 + j,
+                35 + j,
+                *range(base, base + 6),
+                *range(base + 6 + 4 * k, base + 10 + 4 * k),
+            ]
+        )
+    return np.asarray(rows, np.int64)
+
+
 def raw(obs: np.ndarray) -> np.ndarray:
     """The observation unchanged (as float32)."""
     return np.asarray(obs, np.float32)

@@ -18,6 +18,7 @@ from torch import nn
 
 from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Batch
+from neuronsmae.trainers.features import action_feature_index
 from neuronsmae.trainers.mixers import make_mixer
 
 
@@ -68,14 +69,24 @@ class AgentSpec:
     """Feed the one-hot agent index."""
     features: str = "raw"
     """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
+    head: str = "flat"
+    """Q head: flat (one linear output per action) or points (plus a per-action scorer)."""
 
     def build(self) -> RNNAgent:
         """A fresh network with this architecture."""
-        return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim)
+        index = None
+        if self.head == "points":
+            index = torch.as_tensor(action_feature_index(self.features, self.n_actions))
+        return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim, index)
 
 
 def agent_spec(
-    env: EnvSpec, hidden_dim: int, last_action: bool, agent_id: bool, features: str = "raw"
+    env: EnvSpec,
+    hidden_dim: int,
+    last_action: bool,
+    agent_id: bool,
+    features: str = "raw",
+    head: str = "flat",
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
@@ -84,7 +95,7 @@ def agent_spec(
     width = agent_input_dim(
         env.obs_dim, env.n_actions, env.n_agents, last_action=last_action, agent_id=agent_id
     )
-    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features)
+    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features, head)
 
 
 def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:

@@ -55,10 +55,6 @@ class Run:
     train: dict[str, np.ndarray] = field(default_factory=dict)
     eval: dict[str, np.ndarray] = field(default_factory=dict)
 
-    @property
-    def group(self) -> tuple[str, str]:
-        return self.alg, self.level
-
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:
     """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent."""
@@ -108,28 +104,38 @@ def load_run(path: Path) -> Run:
 
 
 def mean_and_spread(
-    curves: Sequence[tuple[np.ndarray, np.ndarray]],
+    curves: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], exact: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(x, mean, low, high)`` of several ``(x, y)`` curves on a common grid.
+    """``(env_steps, mean, low, high)`` of several ``(episodes, env_steps, y)`` curves.
 
-    Each curve is interpolated only inside its own x range, so a shorter run stops
-    contributing where it ends instead of being extrapolated; a single point stays a point.
+    Runs are aligned on the episode count, not on environment steps: evaluations fall due
+    every ``eval_every`` episodes in every run, while the steps they land on differ with
+    episode lengths. Only the range every run has reached is kept (the curve stops where
+    the shortest run stops), so the mean never jumps where a run joins or leaves. With
+    ``exact``, the episode counts all runs share are used as they are (evaluations);
+    otherwise the curves are interpolated on a grid (training rows).
     """
-    curves = [(x[np.isfinite(y)], y[np.isfinite(y)]) for x, y in curves]
-    curves = [(x, y) for x, y in curves if x.size]
-    if not curves:
-        return (np.empty(0),) * 4
-    lo = min(float(x.min()) for x, _ in curves)
-    hi = max(float(x.max()) for x, _ in curves)
+    clean = []
+    for ep, steps, y in curves:
+        ok = np.isfinite(ep) & np.isfinite(steps) & np.isfinite(y)
+        order = np.argsort(ep[ok], kind="stable")
+        if order.size:
+            clean.append((ep[ok][order], steps[ok][order], y[ok][order]))
+    empty = (np.empty(0),) * 4
+    if not clean:
+        return empty
+    lo = max(float(ep[0]) for ep, _, _ in clean)
+    hi = min(float(ep[-1]) for ep, _, _ in clean)
+    if lo > hi:
+        return empty
     grid = np.linspace(lo, hi, GRID_POINTS) if hi > lo else np.array([lo])
-    ys = np.full((len(curves), grid.size), np.nan)
-    for row, (x, y) in enumerate(curves):
-        order = np.argsort(x, kind="stable")
-        inside = (grid >= x.min()) & (grid <= x.max())
-        ys[row, inside] = np.interp(grid[inside], x[order], y[order])
-    keep = np.isfinite(ys).any(axis=0)
-    ys, grid = ys[:, keep], grid[keep]
-    return grid, np.nanmean(ys, axis=0), np.nanmin(ys, axis=0), np.nanmax(ys, axis=0)
+    if exact:
+        shared = set.intersection(*(set(ep.tolist()) for ep, _, _ in clean))
+        if shared:
+            grid = np.array(sorted(shared))
+    steps = np.stack([np.interp(grid, ep, st) for ep, st, _ in clean])
+    ys = np.stack([np.interp(grid, ep, y) for ep, _, y in clean])
+    return steps.mean(axis=0), ys.mean(axis=0), ys.min(axis=0), ys.max(axis=0)
 
 
 SERIES = {
@@ -139,8 +145,13 @@ SERIES = {
 """Source → (attribute of Run, win-rate column, return column)."""
 
 
-def plot_runs(runs: Sequence[Run], out: Path, source: str = "both", title: str = "") -> Path:
-    """Draw win rate and return against environment steps; write a PNG; return its path."""
+def plot_runs(
+    runs: Sequence[Run], out: Path, source: str = "both", title: str = "", by_run: bool = False
+) -> Path:
+    """Draw win rate and return against environment steps; write a PNG; return its path.
+
+    Runs of the same algorithm and level are averaged, unless ``by_run`` (one curve each:
+    for runs that differ in more than their seed)."""
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -150,24 +161,28 @@ def plot_runs(runs: Sequence[Run], out: Path, source: str = "both", title: str =
         ) from exc
     groups: dict[tuple[str, str], list[Run]] = {}
     for run in runs:
-        groups.setdefault(run.group, []).append(run)
-    fig = Figure(figsize=(11, 4.2), dpi=100)
+        key = (run.alg, run.level, run.path.name if by_run else "")
+        groups.setdefault(key, []).append(run)
+    fig = Figure(figsize=(12.5, 4.2), dpi=100)
     FigureCanvasAgg(fig)
     ax_win, ax_ret = fig.subplots(1, 2)
     sources = ("eval", "train") if source == "both" else (source,)
     drew = False
-    for color, ((alg, level), members) in zip(COLORS * 8, sorted(groups.items()), strict=False):
-        name = f"{alg.upper()} vs {level} (n={len(members)})"
+    for color, ((alg, level, run_name), members) in zip(
+        COLORS * 8, sorted(groups.items()), strict=False
+    ):
+        name = run_name or f"{alg.upper()} vs {level} (n={len(members)})"
         for src in sources:
             attr, win_col, ret_col = SERIES[src]
             style = {"eval": dict(lw=2.0, marker="o", ms=3), "train": dict(lw=1.0, alpha=0.6)}[src]
             for ax, col in ((ax_win, win_col), (ax_ret, ret_col)):
+                tables = [getattr(r, attr) for r in members]
                 curves = [
-                    (getattr(r, attr)["env_steps"], getattr(r, attr)[col])
-                    for r in members
-                    if col in getattr(r, attr) and "env_steps" in getattr(r, attr)
+                    (t["episodes"], t["env_steps"], t[col])
+                    for t in tables
+                    if {"episodes", "env_steps", col} <= t.keys()
                 ]
-                x, mean, low, high = mean_and_spread(curves)
+                x, mean, low, high = mean_and_spread(curves, exact=src == "eval")
                 if not x.size:
                     continue
                 drew = True
@@ -177,20 +192,29 @@ def plot_runs(runs: Sequence[Run], out: Path, source: str = "both", title: str =
                     ax.fill_between(
                         x, low, high, color=color, alpha=0.15 if src == "eval" else 0.08
                     )
-        paper = PAPER_WIN_RATE.get(level, {}).get(alg.lower())
-        if paper is not None:
-            ax_win.axhline(
-                paper, color=color, ls=":", lw=1.5, label=f"paper {alg.upper()} vs {level}"
-            )
     if not drew:
         raise RunDirError("the runs have no rows in train.csv or eval.csv yet: nothing to plot")
+    for alg, level in sorted({(r.alg.lower(), r.level) for r in runs}):
+        paper = PAPER_WIN_RATE.get(level, {}).get(alg)
+        if paper is not None:
+            ax_win.axhline(paper, color="black", ls=":", lw=1.2)
+            ax_win.annotate(
+                f"paper {alg.upper()} vs {level}: {paper:.2f}",
+                (0.01, paper),
+                xycoords=("axes fraction", "data"),
+                xytext=(0, 3),
+                textcoords="offset points",
+                fontsize=7,
+            )
     ax_win.set(xlabel="environment steps", ylabel="win rate vs bot", ylim=(-0.02, 1.02))
     ax_ret.set(xlabel="environment steps", ylabel="episode return (blue team)")
     for ax in (ax_win, ax_ret):
         ax.grid(alpha=0.3)
-    ax_win.legend(fontsize=7, loc="best")
-    fig.suptitle(title or "Learning curves (line: mean over runs, band: min-max)", fontsize=10)
-    fig.tight_layout()
+    handles, labels = ax_win.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="center right")
+    default = "one curve per run" if by_run else "line: mean over runs, band: min-max"
+    fig.suptitle(title or f"Learning curves ({default})", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 0.86, 1))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, format="png")
@@ -209,10 +233,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="greedy evaluations, training episodes, or both (both)",
     )
     p.add_argument("--title", default="", help="figure title")
+    p.add_argument(
+        "--by-run",
+        action="store_true",
+        help="one curve per run directory instead of the mean per algorithm and level",
+    )
     args = p.parse_args(argv)
     try:
         runs = [load_run(path) for path in find_runs(args.runs)]
-        out = plot_runs(runs, args.out, args.source, args.title)
+        out = plot_runs(runs, args.out, args.source, args.title, args.by_run)
     except (NeuronsMAEError, OSError) as exc:
         print(f"neuronsmae-plot: {exc}", file=sys.stderr)
         return 2

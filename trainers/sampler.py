@@ -25,6 +25,7 @@ import ray
 from ray.exceptions import RayError
 
 from neuronsmae.trainers.buffer import Episode
+from neuronsmae.trainers.placement import ServerPool
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 
 log = logging.getLogger(__name__)
@@ -74,12 +75,18 @@ class Sampler:
         env_options: Mapping[str, Any] | None = None,
         max_failures: int = 5,
         pipeline: int = 2,
+        worker_resources: Mapping[str, float] | None = None,
+        servers: ServerPool | None = None,
     ) -> None:
         self.env_kind, self.contexts = env_kind, dict(contexts)
         self.base_seed, self.base_port = base_seed, base_port
         self.env_options = dict(env_options or {})
         self.max_failures, self.pipeline = max_failures, pipeline
-        self.actor_cls = ray.remote(num_cpus=worker_cpus, max_restarts=0)(RolloutWorker)
+        self.servers = servers
+        """Server actors the workers connect to (None: each worker's env finds its own)."""
+        self.actor_cls = ray.remote(
+            num_cpus=worker_cpus, resources=dict(worker_resources or {}), max_restarts=0
+        )(RolloutWorker)
         self.actors: list[Any | None] = [self._spawn(i) for i in range(n_workers)]
         self.generation = [0] * n_workers
         self.failures = [0] * n_workers
@@ -90,8 +97,11 @@ class Sampler:
         self.version = -1
 
     def _spawn(self, i: int) -> Any:
+        options = self.env_options
+        if self.servers is not None:  # point worker i at its (live) server actor
+            options = {**options, **self.servers.env_options(i)}
         return self.actor_cls.remote(
-            i, self.env_kind, self.base_seed + i, self.base_port + i, self.env_options
+            i, self.env_kind, self.base_seed + i, self.base_port + i, options
         )
 
     def env_info(self) -> dict[str, Any]:
@@ -208,3 +218,5 @@ class Sampler:
                 ray.kill(actor, no_restart=True)
         self.actors = [None] * len(self.actors)
         self.in_flight.clear()
+        if self.servers is not None:
+            self.servers.close()

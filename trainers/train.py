@@ -43,6 +43,7 @@ from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.features import feature_dim
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
+from neuronsmae.trainers.placement import sampler_placement
 from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy
 from neuronsmae.trainers.sampler import Request, Sampler
@@ -72,7 +73,7 @@ class Trainer:
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             ray.init(
-                address=cfg.address or None,
+                address=cfg.address or "local",  # never join a stray cluster by accident
                 include_dashboard=False,
                 logging_level=logging.WARNING,
                 log_to_driver=False,
@@ -95,19 +96,26 @@ class Trainer:
 
     def _build(self, cfg: TrainConfig) -> None:
         """Start the workers, then size the networks and the buffer from their env."""
+        n_workers, base_seed = cfg.n_workers(), cfg.seed * 1000
         self.sampler = Sampler(
-            cfg.n_workers(),
+            n_workers,
             env_kind=cfg.env,
-            base_seed=cfg.seed * 1000,
+            base_seed=base_seed,
             base_port=cfg.base_port,
             contexts={"level": cfg.level, "coef": cfg.coef},
             worker_cpus=cfg.worker_cpus,
             max_failures=cfg.max_worker_failures,
+            **sampler_placement(cfg, n_workers, base_seed),
         )
         raw = EnvSpec.from_env_info(self.sampler.env_info())
         self.env = replace(raw, obs_dim=feature_dim(cfg.features, raw.obs_dim))
         self.spec = agent_spec(
-            self.env, cfg.agent_hidden, cfg.last_action_input, cfg.agent_id_input, cfg.features
+            self.env,
+            cfg.agent_hidden,
+            cfg.last_action_input,
+            cfg.agent_id_input,
+            cfg.features,
+            cfg.head,
         )
         self.learner = QLearner(
             self.env,

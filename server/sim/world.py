@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pybullet as pb
 
+from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.server.sim import field as F
 
 ROBOT_Z = F.ROBOT_HEIGHT / 2.0
@@ -24,10 +25,22 @@ _ZERO = (0.0, 0.0, 0.0)
 class World:
     """A PyBullet world holding the RMUA field and ``n_robots`` robot bodies."""
 
-    def __init__(self, n_robots: int, physics_dt: float = F.PHYSICS_DT) -> None:
+    def __init__(
+        self, n_robots: int, physics_dt: float = F.PHYSICS_DT, gui: bool = False, n_blue: int = 0
+    ) -> None:
         self.n_robots = n_robots
         self.physics_dt = physics_dt
-        self.client = pb.connect(pb.DIRECT)
+        self.gui, self.n_blue = gui, n_blue
+        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        if self.client < 0:  # PyBullet allows one GUI per process, and needs a display
+            raise InvalidOptionError(
+                "option gui=True: PyBullet could not open its window (one per process)"
+            )
+        if gui:  # top-down camera over the field, no side panels
+            pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=self.client)
+            pb.resetDebugVisualizerCamera(
+                6.0, 0.0, -89.9, [F.CENTER[0], F.CENTER[1], 0.0], physicsClientId=self.client
+            )
         self.bodies: list[int] = []
         self.static_bodies: list[int] = []
         self._robot_shape = -1
@@ -68,6 +81,19 @@ class World:
                 angularDamping=0.0, physicsClientId=cid,
             )
             self.bodies.append(body)
+        if self.gui:
+            self._colour()
+
+    def _colour(self) -> None:
+        """Team colours for robots, dark tall and light low obstacles (the GUI only)."""
+        cid = self.client
+        for i, body in enumerate(self.bodies):
+            rgba = [0.16, 0.43, 0.9, 1] if i < self.n_blue else [0.86, 0.2, 0.2, 1]
+            pb.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
+        for body, box in zip(self.static_bodies, _static_boxes(), strict=True):
+            tall = box[5] > F.ARMOR_HEIGHT
+            rgba = [0.27, 0.27, 0.31, 1] if tall else [0.67, 0.67, 0.69, 1]
+            pb.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
 
     def _box(self, cx: float, cy: float, hx: float, hy: float, yaw: float, h: float) -> int:
         cid = self.client

@@ -1,22 +1,18 @@
 """Grid A* path planner and path follower behind the abstract action space.
 
-The released planner (``shared/spec/reference.md``) is a 4 cm grid over the interior,
-obstacles grown by 0.30 m, other robots blocked ±0.6 m, A* with 4-connectivity. Used
-literally it fails whenever a robot stands inside a grown margin (near a wall, next to a
-box, beside a team-mate), which happens all the time, so here the grown margins and the
-robot squares are *soft*: traversable at a high, depth-graded extra cost. Only cells that
-touch a raw obstacle, and everything outside the walls, are impassable. A start or goal in
-an impassable cell is moved to the nearest passable cell, so a command exists whenever a
-path exists in reality.
+The released planner (reference.md) is a 4 cm grid, obstacles grown by 0.30 m, other
+robots blocked ±0.6 m, 4-connected A*. Taken literally it fails whenever a robot stands
+inside a grown margin, which happens all the time, so here the margins (walls included) and
+the robot squares are *soft*: passable at a high, depth-graded extra cost. Only cells
+touching a raw obstacle, and the outside, are impassable; an impassable start or goal is
+moved to the nearest passable cell. So a command exists whenever a real path does.
 
-Speed: all four robots of a 2v2 replan every 0.4 s decision and the environment must do
->400 decisions/s, so one plan must cost ~100 µs. The static cost grid is built once per
-(resolution, inflate) and shared; robot squares are stamped per query into a
-generation-stamped overlay and the A* bookkeeping is generation-stamped too, so nothing is
-cleared or copied per query. Plain Manhattan A* floods most of the map whenever the path
-must detour or the goal lies in a soft region, so the heuristic is the max of two
-consistent bounds: ALT landmarks on the static grid, and Manhattan plus the least penalty
-still to pay inside the goal's soft region.
+Speed (four robots replan every decision, >400 decisions/s): the static grid and its ALT
+landmark tables are built once and shared; per-query bookkeeping is generation-stamped, so
+nothing is cleared; robot costs are computed on the fly. Manhattan A* floods the map
+whenever it must detour or the goal is in a soft region, so the heuristic is the max of two
+consistent bounds: ALT on the static grid, and Manhattan plus the penalty still to pay in
+the goal's soft region. Paths are (near-)optimal for the soft costs.
 """
 
 from __future__ import annotations
@@ -85,7 +81,7 @@ def _obstacle_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return d
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _push(keys, nodes, size, key, node):
     i = size
     while i > 0 and keys[(i - 1) >> 1] > key:
@@ -95,7 +91,7 @@ def _push(keys, nodes, size, key, node):
     return size + 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _pop(keys, nodes, size):
     """Remove the minimum; returns (its key, its node, new size)."""
     key0, node0 = keys[0], nodes[0]
@@ -146,7 +142,7 @@ def _landmarks(pen: np.ndarray, nx: int, ny: int, k: int) -> np.ndarray:
     for _ in range(k):
         cols.append(_dijkstra(pen, nx, ny, free[np.argmax(nearest[free])]))
         nearest = np.minimum(nearest, cols[-1]) if len(cols) > 1 else cols[-1]
-    return np.ascontiguousarray(np.stack(cols, axis=1))
+    return np.ascontiguousarray(np.stack(cols, axis=1), dtype=np.float32)
 
 
 @lru_cache(maxsize=4)
@@ -168,7 +164,7 @@ def static_grid(res: float = 0.04, inflate: float = 0.30) -> StaticGrid:
     return StaticGrid(res, nx, ny, pen, snap, _landmarks(pen, nx, ny, N_LANDMARKS))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _cost(pen, rob, rb, c, x, y):
     """Extra cost of entering cell c = (x, y): static margin plus the worst robot square.
 
@@ -183,9 +179,12 @@ def _cost(pen, rob, rb, c, x, y):
     return pen[c] + worst
 
 
-@numba.njit(cache=True)
-def _cell_ok(x, y, limit, pen, rob, rb, nx, ny):
-    return 0 <= x < nx and 0 <= y < ny and _cost(pen, rob, rb, y * nx + x, x, y) <= limit
+@numba.njit(cache=True, inline="always")
+def _cell_cost(x, y, pen, rob, rb, nx, ny):
+    """``_cost`` of cell (x, y), infinite outside the grid."""
+    if x < 0 or x >= nx or y < 0 or y >= ny:
+        return np.inf
+    return _cost(pen, rob, rb, y * nx + x, x, y)
 
 
 @numba.njit(cache=True)
@@ -202,13 +201,13 @@ def _line_clear(x0, y0, x1, y1, limit, pen, rob, rb, nx, ny):
     tmx = ((ix + 1 - x0) if dx > 0 else (x0 - ix)) * tdx if dx != 0.0 else np.inf
     tmy = ((iy + 1 - y0) if dy > 0 else (y0 - iy)) * tdy if dy != 0.0 else np.inf
     for _ in range(abs(ex - ix) + abs(ey - iy) + 3):
-        if not _cell_ok(ix, iy, limit, pen, rob, rb, nx, ny):
+        if _cell_cost(ix, iy, pen, rob, rb, nx, ny) > limit:
             return False
         if ix == ex and iy == ey:
             return True
         if abs(tmx - tmy) < 1e-9:  # through a corner: both side cells are touched too
-            if not (_cell_ok(ix + sx, iy, limit, pen, rob, rb, nx, ny)
-                    and _cell_ok(ix, iy + sy, limit, pen, rob, rb, nx, ny)):  # fmt: skip
+            side_x = _cell_cost(ix + sx, iy, pen, rob, rb, nx, ny)
+            if max(side_x, _cell_cost(ix, iy + sy, pen, rob, rb, nx, ny)) > limit:
                 return False
             ix, iy, tmx, tmy = ix + sx, iy + sy, tmx + tdx, tmy + tdy
         elif tmx < tmy:
@@ -330,19 +329,15 @@ def _plan_kernel(grid, start, goal, others, block, gen, fw, iw, hk, hn, pts, cos
         pts[0, 0], pts[0, 1] = start[0] / res, start[1] / res
     if not status & STATUS_GOAL_MOVED:
         pts[n - 1, 0], pts[n - 1, 1] = goal[0] / res, goal[1] / res
-    m = 0
+    m, i = 0, 0
     if status & STATUS_START_MOVED:
         out[0, 0], out[0, 1], m = start[0], start[1], 1
-    i = 0
-    out[m, 0], out[m, 1] = pts[0, 0] * res, pts[0, 1] * res
-    m += 1
+    out[m, 0], out[m, 1], m = pts[0, 0] * res, pts[0, 1] * res, m + 1
     while i < n - 1:
         i = _shortcut(pts, cost, n, i, pen, rob, rb, nx, ny)
-        out[m, 0], out[m, 1] = pts[i, 0] * res, pts[i, 1] * res
-        m += 1
+        out[m, 0], out[m, 1], m = pts[i, 0] * res, pts[i, 1] * res, m + 1
     if n == 1:  # start and goal in the same cell
-        out[m, 0], out[m, 1] = pts[0, 0] * res, pts[0, 1] * res
-        m += 1
+        out[m, 0], out[m, 1], m = pts[0, 0] * res, pts[0, 1] * res, m + 1
     return m, status
 
 
@@ -358,13 +353,11 @@ class Planner:
         self._kgrid = (gr.pen, gr.snap, gr.land, gr.nx, gr.res)
         self._gen = 0
         self._fw = np.zeros((2, n))
-        self._iw = np.zeros((4, n), np.int64)
-        self._hk, self._hn = np.zeros(4 * n + 4), np.zeros(4 * n + 4, np.int64)
+        self._iw = np.zeros((4, n), np.int32)  # int32: half the cache footprint
+        self._hk, self._hn = np.zeros(4 * n + 4), np.zeros(4 * n + 4, np.int32)
         self._pts, self._cost, self._out = np.zeros((n, 2)), np.zeros(n), np.zeros((n + 2, 2))
         self.last_status = STATUS_OK
         """Status bits of the latest :meth:`plan` (``STATUS_*``)."""
-        self.last_statuses: list[int] = []
-        """Status bits of each robot in the latest :meth:`plan_team`."""
         self.no_path_count = 0
         """How many plans found no path (should stay 0 in this arena)."""
 
@@ -381,6 +374,9 @@ class Planner:
         others = np.ascontiguousarray(others, dtype=np.float64).reshape(-1, 2)
         start = np.asarray(start_xy, np.float64)
         goal = np.asarray(goal_xy, np.float64)
+        if self._gen >= 2**31 - 2:  # int32 stamps: start over before they wrap
+            self._gen = 0
+            self._iw[:] = 0
         self._gen += 1
         m, status = _plan_kernel(
             self._kgrid, start, goal, others, self.robot_block, self._gen, self._fw,
@@ -389,17 +385,6 @@ class Planner:
         self.last_status = status
         self.no_path_count += bool(status & STATUS_NO_PATH)
         return self._out[:m].copy()
-
-    def plan_team(self, positions: np.ndarray, goals: np.ndarray) -> list[np.ndarray]:
-        """Plan for every robot of ``positions`` (N, 2) to ``goals`` (N, 2), each avoiding
-        all the others; statuses go to ``last_statuses``."""
-        positions = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
-        goals = np.asarray(goals, dtype=np.float64).reshape(-1, 2)
-        paths, self.last_statuses = [], []
-        for i in range(positions.shape[0]):
-            paths.append(self.plan(positions[i], goals[i], np.delete(positions, i, axis=0)))
-            self.last_statuses.append(self.last_status)
-        return paths
 
 
 @numba.njit(cache=True)

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from neuronsmae.trainers.features import (
     UnknownFeaturesError,
+    action_feature_index,
     feature_dim,
     get_features,
     relative,
 )
+from neuronsmae.trainers.learner import EnvSpec, agent_spec
 
 
 def _obs(
@@ -45,3 +48,23 @@ def test_registry_and_layout_errors() -> None:
         get_features("polar")
     with pytest.raises(UnknownFeaturesError, match="37-value"):
         relative(np.zeros((2, 21), np.float32))
+
+
+def test_points_head_scores_each_action_from_its_own_point() -> None:
+    env = EnvSpec(n_agents=2, n_actions=8, obs_dim=81, state_dim=21, episode_limit=50)
+    spec = agent_spec(env, 16, True, True, "relative", "points")
+    agent = spec.build()
+    with torch.no_grad():  # make the GRU blind to the input and the flat head silent
+        agent.fc1.weight.zero_()
+        agent.fc2.weight.zero_()
+        agent.fc2.bias.zero_()
+    x = torch.randn(1, 1, spec.input_dim)
+    idx = action_feature_index("relative", 8)
+    swapped = x.clone()
+    swapped[..., idx[0]], swapped[..., idx[1]] = x[..., idx[1]], x[..., idx[0]]
+    q, _ = agent(x, agent.initial_hidden(1))
+    q_swapped, _ = agent(swapped, agent.initial_hidden(1))
+    assert q_swapped[0, 0, 0].item() == pytest.approx(q[0, 0, 1].item(), abs=1e-6)
+    assert q_swapped[0, 0, 1].item() == pytest.approx(q[0, 0, 0].item(), abs=1e-6)
+    with pytest.raises(UnknownFeaturesError, match="points"):
+        action_feature_index("raw", 8)

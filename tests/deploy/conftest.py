@@ -1,0 +1,92 @@
+"""Helpers for the deployment tests: free loopback ports and processes that always stop."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+ROUTER_SCRIPT = REPO / "deploy" / "run_router.py"
+
+
+def free_ports(count: int = 1) -> int:
+    """The first of ``count`` consecutive loopback ports that are free right now."""
+    for _ in range(50):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            base = s.getsockname()[1]
+        if base + count < 65536 and all(_free(base + i) for i in range(1, count)):
+            return base
+    raise RuntimeError(f"no {count} consecutive free ports")
+
+
+def _free(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float, what: str) -> None:
+    """Poll ``predicate`` every 0.2 s until it holds; fail the test after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.2)
+    pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+
+
+def listening(port: int) -> bool:
+    """Whether something accepts TCP connections on 127.0.0.1:``port``."""
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+@pytest.fixture
+def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen[bytes]]]:
+    """Start a command (output to a log file in tmp_path); every one is stopped at the end."""
+    started: list[subprocess.Popen[bytes]] = []
+
+    def start(*cmd: str, name: str = "proc") -> subprocess.Popen[bytes]:
+        with (tmp_path / f"{name}-{len(started)}.log").open("wb") as log:
+            proc = subprocess.Popen(
+                [sys.executable, *cmd], stdin=subprocess.DEVNULL, stdout=log, stderr=log
+            )
+        started.append(proc)
+        return proc
+
+    yield start
+    for proc in started:
+        stop(proc)
+
+
+def stop(proc: subprocess.Popen[bytes], sig: int = signal.SIGTERM, timeout: float = 15) -> int:
+    """Signal ``proc`` and wait for it (SIGKILL if it lingers); return its exit status."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def server_cmd(port: int, *extra: str) -> list[str]:
+    """``python -m neuronsmae.server`` on ``port``, unpaced, tied to this test process."""
+    return [
+        "-m", "neuronsmae.server", "--port", str(port), "--time-scale", "0",
+        "--watch-parent", str(os.getpid()), *extra,
+    ]  # fmt: skip

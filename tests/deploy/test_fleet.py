@@ -1,0 +1,123 @@
+"""``neuronsmae-serve``: start N servers, report them, restart a killed one, stop on SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from neuronsmae.server.fleet import main, status
+from neuronsmae.server.supervisor import Fleet, FleetSpec, FleetStartError, Member
+
+from .conftest import free_ports, listening, server_cmd, stop, wait_for
+
+Spawn = Callable[..., subprocess.Popen[bytes]]
+
+
+def _status(base: int, count: int, state: Path) -> list[dict[str, object]]:
+    return status(FleetSpec(base_port=base, count=count), state, timeout=2.0)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.slow
+def test_serve_restarts_a_killed_server_and_stops_on_sigterm(spawn: Spawn, tmp_path: Path) -> None:
+    base, state = free_ports(2), tmp_path / "state.json"
+    args = ["--base-port", str(base), "--count", "2", "--seed", "7", "--time-scale", "0"]
+    args += ["--interval", "0.5", "--log-dir", str(tmp_path / "logs"), "--state-file", str(state)]
+    fleet = spawn("-m", "neuronsmae.server.fleet", *args, name="fleet")
+
+    def all_up() -> bool:
+        assert fleet.poll() is None, "neuronsmae-serve exited"
+        return all(r["state"] == "up" and r["pid"] for r in _status(base, 2, state))
+
+    wait_for(all_up, 240, "both servers")
+    before = _status(base, 2, state)
+    assert [r["port"] for r in before] == [base, base + 1]
+    recorded = json.loads(state.read_text())
+    assert [s["seed"] for s in recorded["servers"]] == [7, 8]
+
+    victim = before[1]
+    os.kill(int(victim["pid"]), signal.SIGKILL)  # type: ignore[call-overload]
+
+    def replaced() -> bool:
+        row = _status(base, 2, state)[1]
+        return row["state"] == "up" and row["pid"] not in (None, victim["pid"])
+
+    wait_for(replaced, 180, "the killed server to be restarted")
+    after = _status(base, 2, state)
+    assert after[1]["server"] != victim["server"] and after[1]["starts"] == 2
+    assert after[0]["pid"] == before[0]["pid"]  # the other one was left alone
+
+    assert stop(fleet) == 0
+    pids = [int(r["pid"]) for r in after]  # type: ignore[call-overload]
+    assert not any(_alive(pid) for pid in pids)
+    assert not listening(base) and not listening(base + 1)
+    assert all(r["state"] == "down" and r["pid"] is None for r in _status(base, 2, state))
+
+
+@pytest.mark.slow
+def test_taken_port_fails_fast(spawn: Spawn, tmp_path: Path) -> None:
+    base = free_ports()
+    squatter = spawn(*server_cmd(base), name="squatter")
+    wait_for(lambda: _status(base, 1, tmp_path / "none.json")[0]["state"] == "up", 180, "squat")
+    fleet = Fleet(FleetSpec(base_port=base, count=1), tmp_path / "logs", tmp_path / "s.json")
+    with fleet, pytest.raises(FleetStartError, match="in use"):
+        fleet.start(timeout=120)
+    assert squatter.poll() is None
+
+
+def test_dead_server_restarts_later_each_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Backoff without real servers: a 'server' that exits at once is restarted 0.5 s, then
+    1 s, then 2 s after each death."""
+    fleet = Fleet(FleetSpec(base_port=free_ports()), tmp_path / "logs", tmp_path / "s.json")
+    crash = [sys.executable, "-c", "import sys; sys.exit(3)"]
+    monkeypatch.setattr(fleet, "command", lambda member: crash)
+    clock = [1000.0]
+    monkeypatch.setattr("neuronsmae.server.supervisor.time.monotonic", lambda: clock[0])
+    member: Member = fleet.members[0]
+    with fleet:
+        fleet._spawn(member)
+        delays = []
+        for _ in range(3):
+            member.proc.wait()  # type: ignore[union-attr]
+            health = fleet.check()[0]
+            assert not health.up and "status 3" in health.error
+            assert member.restart_at is not None
+            delays.append(member.restart_at - clock[0])
+            clock[0] = member.restart_at
+            fleet.check()  # due: started again
+        assert delays == [0.5, 1.0, 2.0]
+        assert member.starts == 4 and fleet.restarts == 3
+    assert "start 4 of the server" in (tmp_path / "logs" / f"server-{member.port}.log").read_text()
+
+
+def test_status_of_nothing_is_down_and_exits_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = free_ports(2)
+    code = main(["status", "--base-port", str(base), "--count", "2", "--json",
+                 "--state-file", str(tmp_path / "absent.json")])  # fmt: skip
+    rows = json.loads(capsys.readouterr().out)
+    assert code == 1 and [r["state"] for r in rows] == ["down", "down"]
+    assert "nothing listens" in rows[0]["error"]
+
+
+def test_bad_count_is_a_usage_error() -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--count", "0"])
+    assert exc.value.code == 2

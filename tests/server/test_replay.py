@@ -1,0 +1,166 @@
+"""Recordings replay exactly; a tampered one is caught at the right decision; videos."""
+
+from __future__ import annotations
+
+import gzip
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from neuronsmae.protocol.errors import RecordingFormatError, ReplayMismatchError
+from neuronsmae.protocol.recording import (
+    Decision,
+    Recording,
+    RecordingWriter,
+    decision_hash,
+    read_recording,
+    write_recording,
+)
+from neuronsmae.server import Arena
+from neuronsmae.server import match as M
+from neuronsmae.server import replay as R
+from neuronsmae.server.render import size as render_size
+
+SEED, EPISODE_SEED = 5, 77
+CONTEXTS = {"level": "middle"}
+
+
+def record_random_episode(path: Path, decisions: int | None = None) -> Recording:
+    """Play uniformly random available abstract actions, writing as we go (the way the
+    client's Recorder does, with the protocol's writer only)."""
+    arena = Arena(seed=SEED)
+    rng = np.random.default_rng(0)
+    arena.reset(CONTEXTS, seed=EPISODE_SEED)
+    rec = Recording(SEED, arena.config.to_dict(), EPISODE_SEED, CONTEXTS,
+                    decision_hash(arena.get_state()))  # fmt: skip
+    writer = RecordingWriter(path, rec)
+    done, k = False, 0
+    while not done and (decisions is None or k < decisions):
+        actions = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+        _, rewards, done, info = arena.step(actions)
+        writer.decision(Decision.after(actions, arena.get_state(), rewards, done, info))
+        k += 1
+    if decisions is None:
+        writer.close()
+    arena.close()
+    return read_recording(path) if decisions is None else rec
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("rec") / "episode.jsonl.gz"
+    record_random_episode(path)
+    return path
+
+
+def test_file_is_gzip_json_lines_with_the_documented_header(recorded: Path) -> None:
+    with gzip.open(recorded, "rt") as f:
+        lines = [json.loads(line) for line in f]
+    head = lines[0]
+    assert head["format"] == "neuronsmae-episode" and head["version"] == 1
+    assert (head["arena_seed"], head["seed"], head["contexts"]) == (SEED, EPISODE_SEED, CONTEXTS)
+    assert head["options"]["action_space"] == "abstract" and len(head["hash"]) == 64
+    assert [row["k"] for row in lines[1:]] == list(range(1, len(lines)))
+    assert lines[-1]["done"] and lines[-1]["winner"] in ("blue", "red", "draw")
+    assert not any(row["done"] for row in lines[1:-1])
+
+
+def test_recorded_episode_replays_with_identical_hashes(recorded: Path) -> None:
+    rec = read_recording(recorded)
+    result = R.replay(rec)
+    assert result.decisions == len(rec.decisions) > 0
+    assert result.complete and result.winner == rec.winner
+    assert R.main([str(recorded)]) == 0
+
+
+def test_a_changed_action_is_reported_at_its_decision(
+    recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = read_recording(recorded)
+    k = 3  # 1-based decision number; both blue robots are alive this early
+    old = rec.decisions[k - 1].actions
+    # Another enemy and another candidate point: a different goal, so a different motion.
+    rec.decisions[k - 1].actions = [(a + 5) % 8 for a in old]
+    tampered = write_recording(tmp_path / "tampered.jsonl.gz", rec)
+    with pytest.raises(ReplayMismatchError) as err:
+        R.replay(read_recording(tampered))
+    assert err.value.decision == k
+    assert R.main([str(tampered)]) == 1
+    assert f"decision {k} differs" in capsys.readouterr().err
+
+
+def test_a_changed_seed_is_reported_at_the_reset(recorded: Path, tmp_path: Path) -> None:
+    rec = read_recording(recorded)
+    rec.seed += 1
+    with pytest.raises(ReplayMismatchError) as err:
+        R.replay(read_recording(write_recording(tmp_path / "seed.jsonl.gz", rec)))
+    assert err.value.decision == 0
+
+
+def test_an_episode_cut_short_still_replays(tmp_path: Path) -> None:
+    path = tmp_path / "cut.jsonl.gz"
+    record_random_episode(path, decisions=4)  # the writer is never closed, as after a crash
+    rec = read_recording(path)
+    assert len(rec.decisions) == 4 and not rec.complete and rec.winner is None
+    assert R.replay(rec).decisions == 4
+
+
+def test_not_a_recording_is_a_format_error(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.jsonl.gz"
+    bad.write_bytes(b"not gzip")
+    with pytest.raises(RecordingFormatError, match="not a gzip"):
+        read_recording(bad)
+    with gzip.open(bad, "wt") as f:
+        f.write('{"format": "neuronsmae-episode", "version": 99}\n')
+    with pytest.raises(RecordingFormatError, match="version 99"):
+        read_recording(bad)
+    assert R.main([str(bad)]) == 2
+
+
+def test_gif_has_one_frame_per_decision_plus_the_start(recorded: Path, tmp_path: Path) -> None:
+    n = len(read_recording(recorded).decisions)
+    gif, half = tmp_path / "ep.gif", tmp_path / "half.gif"
+    # Small frames keep the test quick; the encoder is the same at any size.
+    assert R.main([str(recorded), "--gif", str(gif), "--scale", "0.25"]) == 0
+    assert R.main([str(recorded), "--gif", str(half), "--every", "2", "--scale", "0.25"]) == 0
+    w, h = render_size()
+    with Image.open(gif) as im:
+        assert im.format == "GIF" and im.n_frames == n + 1
+        assert im.size == (round(w / 4), round(h / 4))
+    with Image.open(half) as im:  # every 2nd frame, and the last one (the result) always
+        assert im.n_frames == len(range(0, n + 1, 2)) + (n % 2)
+
+
+def test_mp4_without_imageio_ffmpeg_names_the_extra(
+    recorded: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "imageio_ffmpeg" else real(name, *a),
+    )
+    assert R.main([str(recorded), "--mp4", str(tmp_path / "ep.mp4")]) == 2
+    assert "pip install 'neuronsmae[video]'" in capsys.readouterr().err
+
+
+def test_match_records_every_episode_and_draws_the_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    drawn: list[int] = []
+    monkeypatch.setattr(M, "write_video", lambda path, frames: drawn.append(len(frames)))
+    out = tmp_path / "rec"
+    result = M.play("hard", "easy", 2, seed=3, record=out, gif=tmp_path / "first.gif")
+    files = sorted(out.glob("*.jsonl.gz"))
+    assert [f.name for f in files] == ["episode_00000_s3.jsonl.gz", "episode_00001_s4.jsonl.gz"]
+    recs = [read_recording(f) for f in files]
+    assert all(r.meta == {"blue": "hard", "red": "easy"} and r.complete for r in recs)
+    assert sum(r.winner == "blue" for r in recs) / 2 == result["blue_win_rate"]
+    assert R.replay(recs[0]).decisions == len(recs[0].decisions)
+    assert drawn == [len(recs[0].decisions) + 1]  # the first episode only, every decision

@@ -1,0 +1,79 @@
+"""neuronsmae-plot reads what the real records writer wrote and draws a PNG."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from neuronsmae.trainers import plot as P
+from neuronsmae.trainers.config import TrainConfig
+from neuronsmae.trainers.records import Recorder
+
+pytest.importorskip("matplotlib")
+
+
+def make_run(root: Path, seed: int, evals: int = 3, every: int = 100) -> Path:
+    """A run directory written the way training writes one: config.json, then rows."""
+    cfg = TrainConfig(alg="vdn", level="easy", seed=seed, out=str(root / f"vdn_s{seed}"))
+    run = cfg.run_dir
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+    rec = Recorder(run, total_episodes=evals * every, done_episodes=0, progress=False)
+    rng = np.random.default_rng(seed)
+    for ep in range(10, evals * every + 1, 10):
+        win = min(1.0, ep / (evals * every) + 0.1 * rng.random())
+        rec.train({"episodes": ep, "env_steps": ep * 45, "updates": ep, "wall_seconds": ep / 10,
+                   "epsilon": 0.1, "train_win_rate": win, "train_return": 20 * win - 10,
+                   "loss": None, "q_taken": 0.0, "grad_norm": 1.0, "env_steps_per_s": 400.0,
+                   "restarts": 0})  # fmt: skip
+        if ep % every == 0:
+            rec.eval({"episodes": ep, "env_steps": ep * 45 + seed, "updates": ep,
+                      "wall_seconds": ep / 10, "win_rate": win, "draw_rate": 0.0,
+                      "loss_rate": 1 - win, "mean_return": 20 * win - 10,
+                      "eval_episodes": 20})  # fmt: skip
+    rec.close()
+    return run
+
+
+def test_plot_writes_a_png_from_real_run_directories(tmp_path: Path) -> None:
+    runs = [make_run(tmp_path, seed) for seed in (1, 2)]
+    out = tmp_path / "curves.png"
+    assert P.main([*map(str, runs), "--out", str(out)]) == 0
+    with Image.open(out) as im:
+        assert im.format == "PNG" and im.size[0] > 600 and im.size[1] > 300
+    by_run = tmp_path / "by_run.png"  # a parent directory stands for the runs inside it
+    assert P.main([str(tmp_path), "--by-run", "--source", "eval", "--out", str(by_run)]) == 0
+    assert by_run.stat().st_size > 0
+
+
+def test_runs_are_read_and_averaged_on_their_shared_episodes(tmp_path: Path) -> None:
+    a, b = (P.load_run(make_run(tmp_path, s)) for s in (1, 2))
+    assert (a.alg, a.level, a.seed) == ("vdn", "easy", 1)
+    assert a.eval["episodes"].tolist() == [100, 200, 300]
+    assert np.isnan(a.train["loss"]).all()  # blank cells read as NaN
+    curves = [(r.eval["episodes"], r.eval["env_steps"], r.eval["win_rate"]) for r in (a, b)]
+    x, mean, lo, hi = P.mean_and_spread(curves, exact=True)
+    np.testing.assert_allclose(x, [100 * 45 + 1.5, 200 * 45 + 1.5, 300 * 45 + 1.5])
+    both = np.stack([a.eval["win_rate"], b.eval["win_rate"]])
+    np.testing.assert_allclose(mean, both.mean(0))
+    np.testing.assert_allclose(lo, both.min(0))
+    np.testing.assert_allclose(hi, both.max(0))
+    # A shorter run limits the mean to the range every run reached.
+    short = (curves[1][0][:2], curves[1][1][:2], curves[1][2][:2])
+    x, *_ = P.mean_and_spread([curves[0], short], exact=True)
+    assert len(x) == 2
+
+
+def test_paper_numbers_and_bad_paths(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert P.PAPER_WIN_RATE["hard"] == {"iql": 0.23, "vdn": 0.41, "qmix": 0.34}
+    assert P.main([str(tmp_path / "nowhere"), "--out", str(tmp_path / "x.png")]) == 2
+    assert "not a run directory" in capsys.readouterr().err
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "config.json").write_text(json.dumps({"alg": "vdn", "level": "easy"}))
+    assert P.main([str(empty), "--out", str(tmp_path / "x.png")]) == 2
+    assert "nothing to plot" in capsys.readouterr().err

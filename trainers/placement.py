@@ -1,0 +1,171 @@
+"""Where sampling runs on a Ray cluster: custom resources for workers, and where servers live.
+
+Three ways to give each rollout worker ``i`` its server (``env="remote"``):
+
+* ``servers="local"`` (the default): the worker's ``RM(port=base_port + i)`` launches its own
+  ``neuronsmae-server`` on the worker's node, bound to loopback, and stops it when the worker
+  goes. Sampling traffic never leaves the node, and a worker restarted on another node
+  brings its server along. Nothing in this module is needed for it.
+* ``servers="actors"``: one :class:`ServerActor` per worker index, placed by Ray (on nodes
+  with ``server_resources``), starts a server bound to its node's IP and reports host and
+  port; the worker connects with ``RM(host=..., port=..., launch=False)``. For clusters
+  where simulation and learning-side workers should sit on different machines.
+* ``router="tcp/H:7447"``: the servers are run outside Ray (``neuronsmae-serve --router``)
+  and every worker reaches server ``base_port + i`` through that Zenoh router.
+
+``worker_resources`` (e.g. ``"sampler=1"``) makes each worker also require a custom resource,
+so workers land only on nodes started with ``ray start --resources '{"sampler": N}'``, at
+most N per node.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import ray
+from ray.exceptions import GetTimeoutError, RayError
+
+from neuronsmae.client import ping
+from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.trainers.config import TrainConfig, parse_resources
+
+SERVER_STARTUP_S = 180.0
+"""Seconds a server actor's server may take to answer (imports, JIT cache, arena build)."""
+SERVER_CPUS = 0.5
+"""CPUs Ray reserves per server actor (the server process does the simulation)."""
+
+
+class ServerActor:
+    """A ``neuronsmae-server`` subprocess on this actor's node, reachable from other nodes.
+
+    A plain class: :class:`ServerPool` makes it a Ray actor. The server is a fresh
+    interpreter (never a fork of a process with a Zenoh session) that watches this actor's
+    pid, so it stops when the actor is killed.
+    """
+
+    def __init__(self, port: int, seed: int, host: str = "", time_scale: float = 0.0) -> None:
+        self.host = host or ray.util.get_node_ip_address()
+        self.port, self.seed, self.time_scale = port, seed, time_scale
+        self.starts = 0
+        self.proc: subprocess.Popen[bytes] | None = None
+        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in close)
+            prefix=f"neuronsmae-server-{port}-", suffix=".log", delete=False
+        )
+        self._start()
+
+    def _start(self) -> None:
+        cmd = [
+            sys.executable, "-m", "neuronsmae.server", "--port", str(self.port),
+            "--seed", str(self.seed), "--host", self.host,
+            "--time-scale", str(self.time_scale), "--watch-parent", str(os.getpid()),
+        ]  # fmt: skip
+        self.proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=self._log,
+            stderr=self._log,
+            start_new_session=True,
+        )
+        self.starts += 1
+        deadline = time.monotonic() + SERVER_STARTUP_S
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise ServerUnavailableError(
+                    f"server on {self.host}:{self.port} exited with status "
+                    f"{self.proc.returncode} (log: {self._log.name})"
+                )
+            try:
+                ping(self.port, self.host, timeout=1.0)
+                return
+            except ServerUnavailableError:
+                time.sleep(0.2)
+        raise ServerUnavailableError(f"server on {self.host}:{self.port} did not answer")
+
+    def address(self) -> tuple[str, int]:
+        """Host and port of a live server (started again first if it has died)."""
+        if self.proc is None or self.proc.poll() is not None:
+            self._start()
+        return self.host, self.port
+
+    def node_id(self) -> str:
+        """The Ray node this actor (and so its server) runs on."""
+        return ray.get_runtime_context().get_node_id()
+
+    def close(self) -> None:
+        """Stop the server; safe to call twice."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if not self._log.closed:
+            self._log.close()
+            with contextlib.suppress(OSError):
+                os.unlink(self._log.name)
+
+
+class ServerPool:
+    """One :class:`ServerActor` per worker index, all started at once, reused by restarts."""
+
+    def __init__(
+        self,
+        n: int,
+        base_port: int,
+        base_seed: int,
+        resources: Mapping[str, float] | None = None,
+        host: str = "",
+    ) -> None:
+        self.base_port, self.base_seed, self.host = base_port, base_seed, host
+        self.actor_cls = ray.remote(
+            num_cpus=SERVER_CPUS, resources=dict(resources or {}), max_restarts=0
+        )(ServerActor)
+        self.actors: dict[int, Any] = {i: self._spawn(i) for i in range(n)}
+        refs = [a.address.remote() for a in self.actors.values()]
+        self.addresses: dict[int, tuple[str, int]] = dict(
+            enumerate(ray.get(refs, timeout=SERVER_STARTUP_S * 2))
+        )
+
+    def _spawn(self, i: int) -> Any:
+        return self.actor_cls.remote(self.base_port + i, self.base_seed + i, self.host)
+
+    def env_options(self, i: int) -> dict[str, Any]:
+        """``RM`` options that point worker ``i`` at its server (restarted if it died)."""
+        try:
+            host, port = ray.get(self.actors[i].address.remote(), timeout=SERVER_STARTUP_S)
+        except (RayError, GetTimeoutError):  # the actor itself is gone: place a new one
+            ray.kill(self.actors[i], no_restart=True)
+            self.actors[i] = self._spawn(i)
+            host, port = ray.get(self.actors[i].address.remote(), timeout=SERVER_STARTUP_S)
+        self.addresses[i] = (host, port)
+        return {"host": host, "launch": False}
+
+    def close(self) -> None:
+        """Stop every server and its actor."""
+        refs = [a.close.remote() for a in self.actors.values()]
+        with contextlib.suppress(RayError, GetTimeoutError):
+            ray.get(refs, timeout=15)
+        for actor in self.actors.values():
+            ray.kill(actor, no_restart=True)
+        self.actors.clear()
+
+
+def sampler_placement(cfg: TrainConfig, n_workers: int, base_seed: int) -> dict[str, Any]:
+    """The placement keyword arguments of :class:`~neuronsmae.trainers.sampler.Sampler`
+    for ``cfg`` (call after ``ray.init``: ``servers="actors"`` starts the servers here)."""
+    out: dict[str, Any] = {"worker_resources": parse_resources(cfg.worker_resources)}
+    if cfg.env == "remote" and cfg.router:
+        out["env_options"] = {"router": cfg.router}
+    if cfg.env == "remote" and cfg.servers == "actors" and not cfg.router:
+        out["servers"] = ServerPool(
+            n_workers, cfg.base_port, base_seed, parse_resources(cfg.server_resources)
+        )
+    return out
