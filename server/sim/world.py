@@ -47,33 +47,28 @@ class World:
 
     # --- building -----------------------------------------------------------------------
     def build(self, poses: np.ndarray) -> None:
-        """(Re)build the field and place robots at ``poses`` (N, 3) x, y, yaw.
+        """Place fresh robot bodies at ``poses`` (N, 3) x, y, yaw; build the field once.
 
-        The whole simulation is reset so that an episode never inherits contact caches or
-        solver warm-starts from the previous one: episode n of a long-lived arena is
-        bit-identical to episode n of a fresh one given the same seed.
+        The robots of the previous episode are removed and new bodies created, which drops
+        every contact manifold and solver warm-start involving them (static-static pairs
+        keep none), so an episode never inherits state from the one before: episode n of a
+        long-lived arena is bit-identical to the same episode in a fresh arena. Rebuilding
+        only the four robots costs a few milliseconds instead of the ~20 ms of a full
+        ``resetSimulation`` and field rebuild.
         """
         cid = self.client
-        pb.resetSimulation(physicsClientId=cid)
-        pb.setGravity(0, 0, 0, physicsClientId=cid)
-        pb.setPhysicsEngineParameter(
-            fixedTimeStep=self.physics_dt, numSubSteps=1, numSolverIterations=10,
-            deterministicOverlappingPairs=1,
-            physicsClientId=cid,
-        )
-        self.static_bodies = [self._box(*b) for b in _static_boxes()]
-        self._robot_shape = pb.createCollisionShape(
-            pb.GEOM_BOX,
-            halfExtents=[F.ROBOT_LENGTH / 2, F.ROBOT_WIDTH / 2, F.ROBOT_HEIGHT / 2],
-            physicsClientId=cid,
-        )
+        if not self.static_bodies:
+            self._build_field()
+        for body in self.bodies:
+            pb.removeBody(body, physicsClientId=cid)
         self.bodies = []
         for x, y, yaw in poses:
             body = pb.createMultiBody(
                 baseMass=F.ROBOT_MASS,
                 baseCollisionShapeIndex=self._robot_shape,
                 basePosition=[x, y, ROBOT_Z],
-                baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), useMaximalCoordinates=True,
+                baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]),
+                useMaximalCoordinates=True,
                 physicsClientId=cid,
             )
             pb.changeDynamics(
@@ -83,6 +78,22 @@ class World:
             self.bodies.append(body)
         if self.gui:
             self._colour()
+
+    def _build_field(self) -> None:
+        """Engine settings, walls and obstacles, and the shared robot collision shape."""
+        cid = self.client
+        pb.resetSimulation(physicsClientId=cid)
+        pb.setGravity(0, 0, 0, physicsClientId=cid)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.physics_dt, numSubSteps=1, numSolverIterations=10,
+            deterministicOverlappingPairs=1, physicsClientId=cid,
+        )
+        self.static_bodies = [self._box(*b) for b in _static_boxes()]
+        self._robot_shape = pb.createCollisionShape(
+            pb.GEOM_BOX,
+            halfExtents=[F.ROBOT_LENGTH / 2, F.ROBOT_WIDTH / 2, F.ROBOT_HEIGHT / 2],
+            physicsClientId=cid,
+        )
 
     def _colour(self) -> None:
         """Team colours for robots, dark tall and light low obstacles (the GUI only)."""

@@ -35,7 +35,7 @@ ROBOT_BASE = 8.0
 """Extra cost of entering another robot's square at its edge."""
 ROBOT_SLOPE = 56.0
 """Further extra cost growing linearly towards the other robot's centre."""
-N_LANDMARKS = 8
+N_LANDMARKS = 4
 """ALT landmarks; more tighten the heuristic but cost a lookup each per push."""
 TIE_BREAK = 1.0 + 1e-3
 """Heuristic weight just above 1: among equal-f nodes prefer the one nearer the goal."""
@@ -48,9 +48,10 @@ STATUS_GOAL_MOVED = 2
 STATUS_NO_PATH = 4
 """No path exists; :meth:`Planner.plan` returned an empty path (``follow`` then stops)."""
 
-# Rows of the per-planner scratch arrays (flat cells, generation-stamped, never cleared).
-_G, _PD = 0, 1  # float rows: cost-to-come, goal penalty
-_GST, _PAR, _CST, _PST = 0, 1, 2, 3  # int rows: stamp of g, parent, closed stamp, stamp of pd
+# Columns of the per-planner scratch arrays (cells × fields, generation-stamped, never
+# cleared).
+_G, _PD = 0, 1  # float: cost-to-come, goal penalty
+_GST, _PAR, _CST, _PST = 0, 1, 2, 3  # int32: stamp of g, parent, closed stamp, stamp of pd
 _DX, _DY = (1, -1, 0, 0), (0, 0, 1, -1)
 
 
@@ -165,26 +166,20 @@ def static_grid(res: float = 0.04, inflate: float = 0.30) -> StaticGrid:
 
 
 @numba.njit(cache=True, inline="always")
-def _cost(pen, rob, rb, c, x, y):
-    """Extra cost of entering cell c = (x, y): static margin plus the worst robot square.
+def _cost(x, y, pen, rob, rb, nx, ny):
+    """Extra cost of entering cell (x, y): static margin plus the worst robot square.
 
-    Robot squares are evaluated on the fly (``rob`` in cell units, half-size ``rb`` cells):
-    with at most three other robots that is cheaper than stamping ~3000 cells per query.
+    Infinite outside the grid. Robot squares are evaluated on the fly (``rob`` in cell
+    units, half-size ``rb`` cells): for three robots cheaper than stamping ~3000 cells.
     """
+    if x < 0 or x >= nx or y < 0 or y >= ny:
+        return np.inf
     worst = 0.0
     for r in range(rob.shape[0]):
         cheb = max(abs(x - rob[r, 0]), abs(y - rob[r, 1]))
         if cheb < rb:
             worst = max(worst, ROBOT_BASE + ROBOT_SLOPE * (1.0 - cheb / rb))
-    return pen[c] + worst
-
-
-@numba.njit(cache=True, inline="always")
-def _cell_cost(x, y, pen, rob, rb, nx, ny):
-    """``_cost`` of cell (x, y), infinite outside the grid."""
-    if x < 0 or x >= nx or y < 0 or y >= ny:
-        return np.inf
-    return _cost(pen, rob, rb, y * nx + x, x, y)
+    return pen[y * nx + x] + worst
 
 
 @numba.njit(cache=True)
@@ -201,13 +196,13 @@ def _line_clear(x0, y0, x1, y1, limit, pen, rob, rb, nx, ny):
     tmx = ((ix + 1 - x0) if dx > 0 else (x0 - ix)) * tdx if dx != 0.0 else np.inf
     tmy = ((iy + 1 - y0) if dy > 0 else (y0 - iy)) * tdy if dy != 0.0 else np.inf
     for _ in range(abs(ex - ix) + abs(ey - iy) + 3):
-        if _cell_cost(ix, iy, pen, rob, rb, nx, ny) > limit:
+        if _cost(ix, iy, pen, rob, rb, nx, ny) > limit:
             return False
         if ix == ex and iy == ey:
             return True
         if abs(tmx - tmy) < 1e-9:  # through a corner: both side cells are touched too
-            side_x = _cell_cost(ix + sx, iy, pen, rob, rb, nx, ny)
-            if max(side_x, _cell_cost(ix, iy + sy, pen, rob, rb, nx, ny)) > limit:
+            side_x = _cost(ix + sx, iy, pen, rob, rb, nx, ny)
+            if max(side_x, _cost(ix, iy + sy, pen, rob, rb, nx, ny)) > limit:
                 return False
             ix, iy, tmx, tmy = ix + sx, iy + sy, tmx + tdx, tmy + tdy
         elif tmx < tmy:
@@ -225,24 +220,24 @@ def _goal_penalty(t, pen, rob, rb, nx, ny, fw, iw, gen, hk, hn):
     for every cell below the cap (marked ``_PST == gen``) and returns the cap; the capped P
     is consistent, and plus Manhattan it bounds the cost-to-go.
     """
-    fw[_PD, t], iw[_PST, t] = 0.0, -gen
+    fw[t, _PD], iw[t, _PST] = 0.0, -gen
     size = _push(hk, hn, 0, 0.0, t)
     while size > 0:
         d, u, size = _pop(hk, hn, size)
-        if iw[_PST, u] == gen:
+        if iw[u, _PST] == gen:
             continue
-        iw[_PST, u] = gen
+        iw[u, _PST] = gen
         ux, uy = u % nx, u // nx
-        cu = _cost(pen, rob, rb, u, ux, uy)
+        cu = _cost(ux, uy, pen, rob, rb, nx, ny)
         if cu == 0.0:
             return d
         for k in range(4):
             vx, vy = ux + _DX[k], uy + _DY[k]
             v = vy * nx + vx
-            if not (0 <= vx < nx and 0 <= vy < ny) or pen[v] == np.inf or iw[_PST, v] == gen:
+            if not (0 <= vx < nx and 0 <= vy < ny) or pen[v] == np.inf or iw[v, _PST] == gen:
                 continue
-            if iw[_PST, v] != -gen or d + cu < fw[_PD, v]:
-                fw[_PD, v], iw[_PST, v] = d + cu, -gen
+            if iw[v, _PST] != -gen or d + cu < fw[v, _PD]:
+                fw[v, _PD], iw[v, _PST] = d + cu, -gen
                 size = _push(hk, hn, size, d + cu, v)
     return np.inf
 
@@ -254,26 +249,26 @@ def _astar(s, t, pen, land, rob, rb, nx, ny, fw, iw, gen, hk, hn):
     cap = _goal_penalty(t, pen, rob, rb, nx, ny, fw, iw, gen, hk, hn)
     land_t = land[t].copy()
     back_t = land_t - pen[t]
-    fw[_G, s], iw[_GST, s], iw[_PAR, s] = 0.0, gen, -1
+    fw[s, _G], iw[s, _GST], iw[s, _PAR] = 0.0, gen, -1
     size = _push(hk, hn, 0, 0.0, s)
     while size > 0:
         _, u, size = _pop(hk, hn, size)
-        if iw[_CST, u] == gen:
+        if iw[u, _CST] == gen:
             continue
-        iw[_CST, u] = gen
+        iw[u, _CST] = gen
         if u == t:
             return True
         ux, uy = u % nx, u // nx
         for k in range(4):
             vx, vy = ux + _DX[k], uy + _DY[k]
             v = vy * nx + vx
-            if not (0 <= vx < nx and 0 <= vy < ny) or pen[v] == np.inf or iw[_CST, v] == gen:
+            if not (0 <= vx < nx and 0 <= vy < ny) or pen[v] == np.inf or iw[v, _CST] == gen:
                 continue
-            gv = fw[_G, u] + 1.0 + _cost(pen, rob, rb, v, vx, vy)
-            if iw[_GST, v] == gen and gv >= fw[_G, v]:
+            gv = fw[u, _G] + 1.0 + _cost(vx, vy, pen, rob, rb, nx, ny)
+            if iw[v, _GST] == gen and gv >= fw[v, _G]:
                 continue
-            fw[_G, v], iw[_GST, v], iw[_PAR, v] = gv, gen, u
-            h = abs(vx - tx) + abs(vy - ty) + (fw[_PD, v] if iw[_PST, v] == gen else cap)
+            fw[v, _G], iw[v, _GST], iw[v, _PAR] = gv, gen, u
+            h = abs(vx - tx) + abs(vy - ty) + (fw[v, _PD] if iw[v, _PST] == gen else cap)
             for q in range(land.shape[1]):
                 lv = land[v, q]
                 h = max(h, land_t[q] - lv, lv - pen[v] - back_t[q])
@@ -319,12 +314,12 @@ def _plan_kernel(grid, start, goal, others, block, gen, fw, iw, hk, hn, pts, cos
         return 0, status | STATUS_NO_PATH
     n, u = 0, t  # grid path into pts (cell units, centres at +0.5), start first
     while u != -1:
-        n, u = n + 1, iw[_PAR, u]
+        n, u = n + 1, iw[u, _PAR]
     u = t
     for k in range(n - 1, -1, -1):
         ux, uy = u % nx, u // nx
-        pts[k, 0], pts[k, 1], cost[k] = ux + 0.5, uy + 0.5, _cost(pen, rob, rb, u, ux, uy)
-        u = iw[_PAR, u]
+        pts[k, 0], pts[k, 1], cost[k] = ux + 0.5, uy + 0.5, _cost(ux, uy, pen, rob, rb, nx, ny)
+        u = iw[u, _PAR]
     if not status & STATUS_START_MOVED:
         pts[0, 0], pts[0, 1] = start[0] / res, start[1] / res
     if not status & STATUS_GOAL_MOVED:
@@ -352,8 +347,8 @@ class Planner:
         gr, n = self.grid, self.grid.nx * self.grid.ny
         self._kgrid = (gr.pen, gr.snap, gr.land, gr.nx, gr.res)
         self._gen = 0
-        self._fw = np.zeros((2, n))
-        self._iw = np.zeros((4, n), np.int32)  # int32: half the cache footprint
+        self._fw = np.zeros((n, 2))
+        self._iw = np.zeros((n, 4), np.int32)  # a cell's entries share a cache line
         self._hk, self._hn = np.zeros(4 * n + 4), np.zeros(4 * n + 4, np.int32)
         self._pts, self._cost, self._out = np.zeros((n, 2)), np.zeros(n), np.zeros((n + 2, 2))
         self.last_status = STATUS_OK
@@ -372,8 +367,8 @@ class Planner:
         """
         others = np.zeros((0, 2)) if others_xy is None else others_xy
         others = np.ascontiguousarray(others, dtype=np.float64).reshape(-1, 2)
-        start = np.asarray(start_xy, np.float64)
-        goal = np.asarray(goal_xy, np.float64)
+        start = np.ascontiguousarray(start_xy, dtype=np.float64)
+        goal = np.ascontiguousarray(goal_xy, dtype=np.float64)
         if self._gen >= 2**31 - 2:  # int32 stamps: start over before they wrap
             self._gen = 0
             self._iw[:] = 0

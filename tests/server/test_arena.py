@@ -200,3 +200,24 @@ def test_corner_spawns() -> None:
     a.reset()
     np.testing.assert_allclose(a.poses[:, :2], np.array(F.BIRTH_AREAS))
     a.close()
+
+
+def test_episode_in_long_lived_arena_equals_fresh_arena() -> None:
+    """Robots are rebuilt at each reset: no contact or solver state leaks across episodes."""
+
+    def play(arena: Arena, seed: int) -> bytes:
+        obs = arena.reset({"level": "hard"}, seed=seed)
+        out = [np.stack(obs).tobytes()]
+        done = False
+        while not done:
+            obs, _, done, _ = arena.step([5, 2])
+            out.append(np.stack(obs).tobytes())
+        return b"".join(out)
+
+    used = Arena(seed=0)
+    play(used, 11)
+    play(used, 12)
+    fresh = Arena(seed=0)
+    assert play(used, 13) == play(fresh, 13)
+    used.close()
+    fresh.close()
