@@ -148,7 +148,7 @@ def _landmarks(pen: np.ndarray, nx: int, ny: int, k: int) -> np.ndarray:
 
 @lru_cache(maxsize=4)
 def static_grid(res: float = 0.04, inflate: float = 0.30) -> StaticGrid:
-    """Build (once per parameter pair, ~0.1 s) the arena's cost grid; shared by planners."""
+    """Build (once per parameter pair and process, ~0.4 s) the cost grid; planners share it."""
     nx, ny = round(field.FIELD_X / res), round(field.FIELD_Y / res)
     x, y = np.meshgrid((np.arange(nx) + 0.5) * res, (np.arange(ny) + 0.5) * res)
     d_obs = _obstacle_distance(x, y)

@@ -1,0 +1,185 @@
+"""Sampling throughput with 1, 2, 4 and 8 servers on one machine, and a cluster projection.
+
+    python -m bench.bench_scaling [--counts 1 2 4 8] [--seconds 8] [--repeats 3]
+
+Starts the largest number of servers once with the fleet supervisor (``neuronsmae-serve``'s
+:class:`~neuronsmae.server.supervisor.Fleet`, unpaced: ``time_scale=0``). For each count
+``n`` and each repeat, ``n`` client processes (spawned, one per server, like rollout
+workers) open ``RM(port=..., launch=False)`` on the training task (abstract actions,
+cooperative 2 v 2), warm up, meet at a barrier, then play random allowed actions for
+``--seconds``. The aggregate rate is the sum of the clients' decisions/s; the table reports
+the median over repeats, with the CPU seconds that servers and clients spent per decision
+(psutil for the servers, ``process_time`` for the clients) and the load average.
+
+The projection to 20-25 workers assumes what a cluster gives and this machine does not: a
+core per (worker, server) pair on the worker's node, so each pair runs at the rate its own
+CPU cost allows (1 / CPU-seconds per decision, measured here); it is a projection, not a
+measurement. Writes bench/out/scaling.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import os
+import statistics
+import tempfile
+import time
+from multiprocessing.synchronize import Barrier
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+
+from bench.common import machine, table, write_json
+from neuronsmae.client import RM
+from neuronsmae.server.supervisor import Fleet, FleetSpec
+
+OPTIONS: dict[str, Any] = {
+    "action_space": "abstract",
+    "n_blue": 2,
+    "n_red": 2,
+    "mode": "cooperative",
+}
+"""The task the trainers sample (``trainers.rollout.DEFAULT_ENV_OPTIONS``)."""
+WARMUP_DECISIONS = 10
+PROJECT_TO = (20, 25)
+
+
+def drive(port: int, seed: int, seconds: float, barrier: Barrier, out: Any) -> None:
+    """One client process: random allowed actions on its server for ``seconds``."""
+    rng = np.random.default_rng(seed)
+    env = RM(seed=seed, port=port, launch=False, timeout=60.0, **OPTIONS)
+    try:
+
+        def step() -> None:
+            actions = [int(rng.choice(np.flatnonzero(m))) for m in env.get_avail_actions()]
+            if env.step(actions)[2]:
+                env.reset()
+
+        env.reset()
+        for _ in range(WARMUP_DECISIONS):
+            step()
+        barrier.wait()
+        done, cpu, start = 0, time.process_time(), time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            step()
+            done += 1
+        wall = time.perf_counter() - start
+        out.put({"port": port, "decisions": done, "wall": wall, "cpu": time.process_time() - cpu})
+    finally:
+        env.close()
+
+
+def cpu_seconds(procs: list[psutil.Process]) -> float:
+    return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
+
+
+def one_round(ports: list[int], seconds: float, seed: int) -> dict[str, Any]:
+    """All clients at once, started together; aggregate rate and CPU per decision."""
+    ctx = mp.get_context("spawn")  # never fork: this process and the clients use Zenoh
+    barrier, out = ctx.Barrier(len(ports) + 1), ctx.Queue()
+    clients = [
+        ctx.Process(target=drive, args=(port, seed + i, seconds, barrier, out), daemon=True)
+        for i, port in enumerate(ports)
+    ]
+    for client in clients:
+        client.start()
+    servers = [p for p in psutil.Process().children() if _serves(p, ports)]
+    barrier.wait(timeout=300)
+    load, server_cpu = os.getloadavg()[0], cpu_seconds(servers)
+    results = [out.get(timeout=seconds + 120) for _ in clients]
+    server_cpu = cpu_seconds(servers) - server_cpu
+    for client in clients:
+        client.join(30)
+    decisions = sum(r["decisions"] for r in results)
+    return {
+        "rate": sum(r["decisions"] / r["wall"] for r in results),
+        "per_client": [round(r["decisions"] / r["wall"], 1) for r in results],
+        "cpu_per_decision": (server_cpu + sum(r["cpu"] for r in results)) / max(decisions, 1),
+        "load1": load,
+    }
+
+
+def _serves(proc: psutil.Process, ports: list[int]) -> bool:
+    try:
+        cmd = proc.cmdline()
+    except psutil.Error:
+        return False
+    return "neuronsmae.server" in cmd and any(str(p) in cmd for p in ports)
+
+
+def measure(counts: list[int], seconds: float, repeats: int, base_port: int) -> list[dict]:
+    spec = FleetSpec(base_port=base_port, count=max(counts), seed=1, time_scale=0.0)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp, Fleet(spec, Path(tmp), Path(tmp) / "s.json") as f:
+        f.start()
+        if not all(h.up for h in f.check()):
+            raise RuntimeError("not every server answers; see the logs in " + tmp)
+        for n in counts:
+            rounds = [one_round(spec.ports()[:n], seconds, 100 * r) for r in range(repeats)]
+            rates = [r["rate"] for r in rounds]
+            cpu = statistics.median(r["cpu_per_decision"] for r in rounds)
+            rows.append(
+                {
+                    "servers": n,
+                    "decisions_per_s": round(statistics.median(rates), 1),
+                    "min": round(min(rates), 1),
+                    "max": round(max(rates), 1),
+                    "per_server": round(statistics.median(rates) / n, 1),
+                    "cpu_ms_per_decision": round(cpu * 1000, 2),
+                    "load1": round(statistics.median(r["load1"] for r in rounds), 2),
+                    "rounds": rounds,
+                }
+            )
+            print(f"{n} servers: {rows[-1]['decisions_per_s']} decisions/s", flush=True)
+    return rows
+
+
+def projection(rows: list[dict]) -> list[dict]:
+    """Decisions/s for 20-25 pairs with a core each, from the measured CPU per decision."""
+    cpu_s = statistics.median(r["cpu_ms_per_decision"] for r in rows) / 1000
+    single = rows[0]["decisions_per_s"] if rows[0]["servers"] == 1 else None
+    out = []
+    for workers in PROJECT_TO:
+        out.append(
+            {
+                "workers": workers,
+                "cpu_bound_decisions_per_s": round(workers / cpu_s, 0),
+                "at_measured_single_rate": round(workers * single, 0) if single else None,
+            }
+        )
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument("--seconds", type=float, default=8.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--base-port", type=int, default=18000)
+    args = parser.parse_args()
+    load_before = os.getloadavg()
+    rows = measure(sorted(args.counts), args.seconds, args.repeats, args.base_port)
+    proj = projection(rows)
+    columns = ["servers", "decisions_per_s", "min", "max", "per_server"]
+    columns += ["cpu_ms_per_decision", "load1"]
+    print(table(rows, columns))
+    print(table(proj, ["workers", "cpu_bound_decisions_per_s", "at_measured_single_rate"]))
+    print(f"load average before: {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f}")
+    report = {
+        "options": OPTIONS,
+        "seconds": args.seconds,
+        "repeats": args.repeats,
+        "results": rows,
+        "projection": proj,
+        "load_before": load_before,
+        "machine": machine(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    print(f"wrote {write_json('scaling', report)}")
+
+
+if __name__ == "__main__":
+    main()
