@@ -1,17 +1,23 @@
 """Run a Zenoh router for NeuronsMAE servers and clients on different machines.
 
     python deploy/run_router.py [--config deploy/zenoh-router.json5]
-                                [--listen tcp/0.0.0.0:7447]
+                                [--listen tcp/10.0.0.1:7447]
 
 Opens one Zenoh session in ``router`` mode (the configuration file's settings, then
 ``--listen`` if given) and keeps it open until SIGINT or SIGTERM. This is the same router
 as Zenoh's ``zenohd`` minus the plugins, runnable with nothing but the ``eclipse-zenoh``
 package the project already depends on. See ``deploy/README.md``.
+
+Like the servers, the router listens on loopback unless told otherwise (the file or
+``--listen``), and says so on stderr when it listens anywhere else: the protocol does not
+authenticate clients, so reaching a network must be a deliberate choice. For a network, use
+``deploy/zenoh-router-tls.json5`` (mutual TLS) and ``deploy/zenoh-router-acl.json5``.
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import json
 import signal
 import sys
@@ -22,6 +28,25 @@ from pathlib import Path
 import zenoh
 
 CONFIG = Path(__file__).resolve().parent / "zenoh-router.json5"
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+
+
+def exposed(endpoints: Sequence[str], mtls: bool = False) -> list[str]:
+    """The endpoints (``proto/host:port``) open to a network without authentication: not on
+    a loopback address, and not TLS with client certificates required (``mtls``)."""
+    out = []
+    for ep in endpoints:
+        proto, _, address = ep.partition("/")
+        if proto == "tls" and mtls:
+            continue
+        host = address.split("#", 1)[0].rsplit(":", 1)[0].strip("[]")
+        try:
+            loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
+        except ValueError:  # a host name: it may resolve to anything
+            loopback = False
+        if not loopback:
+            out.append(ep)
+    return out
 
 
 def router_config(config: Path | None, listen: Sequence[str]) -> zenoh.Config:
@@ -33,7 +58,7 @@ def router_config(config: Path | None, listen: Sequence[str]) -> zenoh.Config:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("scouting/gossip/enabled", "false")
-        conf.insert_json5("listen/endpoints", json.dumps(["tcp/0.0.0.0:7447"]))
+        conf.insert_json5("listen/endpoints", json.dumps([DEFAULT_LISTEN]))
     conf.insert_json5("mode", '"router"')
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
@@ -53,14 +78,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help="listen here instead of the file's endpoints (repeatable), e.g. tcp/0.0.0.0:7447",
+        help="listen here instead of the file's endpoints (repeatable), e.g. tcp/10.0.0.1:7447",
     )
     args = p.parse_args(argv)
     stopped: list[int] = []  # a plain list, not an Event: a handler must never take a lock
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, frame: stopped.append(signum))
+    conf = router_config(args.config, args.listen)
+    endpoints = json.loads(conf.get_json("listen/endpoints"))
+    if isinstance(endpoints, dict):  # per-mode form: {router: [...], peer: [...]}
+        endpoints = endpoints.get("router", [])
+    mtls = json.loads(conf.get_json("transport/link/tls/enable_mtls")) is True
+    for ep in exposed(endpoints, mtls):
+        sys.stderr.write(
+            f"run_router.py: WARNING: listening on {ep}, not on loopback: anyone who can reach "
+            "it can reach every server behind this router; use mutual TLS "
+            "(deploy/zenoh-router-tls.json5) and access control (deploy/zenoh-router-acl.json5)\n"
+        )
     try:
-        session = zenoh.open(router_config(args.config, args.listen))
+        session = zenoh.open(conf)
     except zenoh.ZError as exc:
         sys.stderr.write(f"run_router.py: cannot start the router: {exc}\n")
         return 1

@@ -10,6 +10,7 @@ are wrong, 1 when the arena or Zenoh fails to start.
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import logging
 import os
 import sys
@@ -58,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--host",
         default="127.0.0.1",
-        help="address to listen on (127.0.0.1; 0.0.0.0 for remote clients)",
+        help="address to listen on (127.0.0.1; 0.0.0.0 for remote clients, which logs a warning)",
     )
     p.add_argument(
         "--router",
@@ -113,6 +114,9 @@ def run(argv: Sequence[str] | None = None) -> int:
     if not 0 < args.port < 65536 or args.time_scale < 0:
         log.error("--port must be in 1..65535 and --time-scale >= 0")
         return 2
+    warning = exposure_warning(args.host, args.port)
+    if warning:
+        log.warning("%s", warning)
     stop = StopSignal()
     stop.install()
     if args.watch_parent is not None:
@@ -128,6 +132,28 @@ def run(argv: Sequence[str] | None = None) -> int:
     except (OSError, zenoh.ZError, NeuronsMAEError) as exc:
         log.error("cannot start: %s", exc)
         return 1
+
+
+def exposure_warning(host: str, port: int) -> str | None:
+    """The warning to log when ``host`` is not a loopback address, else None.
+
+    Why warn: the protocol identifies clients but does not authenticate them (see
+    ``protocol/README.md``), so a server reachable from a network can be driven by anyone on
+    it. Listening there must be a visible, deliberate choice.
+    """
+    name = host.strip("[]")
+    if name == "localhost":
+        return None
+    try:
+        if ipaddress.ip_address(name).is_loopback:
+            return None
+    except ValueError:  # a host name: it may resolve to anything
+        pass
+    return (
+        f"listening on {host}:{port}, not on loopback: anyone who can reach it can drive "
+        "this arena (the protocol has no authentication); expose it only on a trusted "
+        "network, or keep it on loopback behind a TLS router (deploy/zenoh-router-tls.json5)"
+    )
 
 
 def _serve(args: argparse.Namespace, stop: StopSignal) -> int:

@@ -72,8 +72,9 @@ class TrainConfig:
     episodes: int = 6000
     """Training episodes in total (a resumed run continues until this many)."""
     max_minutes: float = 25.0
-    """Wall-clock budget of the training in minutes (0: none); the final evaluation follows.
-    With the episode cap it keeps a default run within half an hour on a 2-core laptop."""
+    """Wall-clock budget of this session's training in minutes (0: none; a resumed run gets a
+    fresh budget); the final evaluation follows. With the episode cap it keeps a default run
+    within half an hour on a 2-core laptop."""
     out: str = ""
     """Run directory; empty means runs/<alg>_<level>_s<seed>."""
     # --- environment -------------------------------------------------------------------

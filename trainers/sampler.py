@@ -15,6 +15,7 @@ after ``max_failures`` consecutive failures; the run stops only when no worker i
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Mapping, Sequence
@@ -212,10 +213,17 @@ class Sampler:
         return sorted(out, key=lambda e: e.info["seed"])
 
     def close(self) -> None:
-        """Stop every actor (their environments close with their processes)."""
-        for actor in self.actors:
-            if actor is not None:
-                ray.kill(actor, no_restart=True)
+        """Close every worker's env, then stop the actors.
+
+        Closing first releases a server that outlives the run (``neuronsmae-serve``, a
+        router) at once; killed without it, the server stays owned until its lease ends
+        and the next run's workers are refused with ``BusyError`` meanwhile.
+        """
+        live = [actor for actor in self.actors if actor is not None]
+        with contextlib.suppress(RayError):  # a dead or stuck worker: killed just below
+            ray.get([actor.close.remote() for actor in live], timeout=5.0)
+        for actor in live:
+            ray.kill(actor, no_restart=True)
         self.actors = [None] * len(self.actors)
         self.in_flight.clear()
         if self.servers is not None:

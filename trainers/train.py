@@ -180,10 +180,10 @@ class Trainer:
         }
 
     def _more(self) -> bool:
-        """Episodes left to play and wall-clock budget left."""
-        c, limit = self.counters, self.cfg.max_minutes * 60.0
-        wall = self.wall_base + time.perf_counter() - self.session_start
-        return c.episodes < self.cfg.episodes and (limit <= 0 or wall < limit)
+        """Episodes left to play and, in this session, wall-clock budget left."""
+        limit = self.cfg.max_minutes * 60.0
+        elapsed = time.perf_counter() - self.session_start
+        return self.counters.episodes < self.cfg.episodes and (limit <= 0 or elapsed < limit)
 
     def _run_async(self) -> None:
         issued = self.counters.episodes
