@@ -332,10 +332,9 @@ class Arena(ArenaAPI):
             targets = np.where(self.zones.silenced(self.t), -1, targets)
         vel = self.chassis.step(cmd)
         self.world.step(self.poses, vel, ref.alive)
-        was_alive = ref.alive.copy()
-        ref.physics_step(self.poses, targets, tally)
-        for i in np.flatnonzero(was_alive & ~ref.alive):
-            self.chassis.stop(int(i))
-            self.cmd[i] = 0.0
+        if ref.physics_step(self.poses, targets, tally):  # someone was destroyed
+            for i in np.flatnonzero(~ref.alive):
+                self.chassis.stop(int(i))  # idempotent for robots destroyed earlier
+                self.cmd[i] = 0.0
         self.t += 1
         self.done = ref.check_end(self.t, self.config.episode_steps)
