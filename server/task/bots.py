@@ -60,10 +60,13 @@ def _nearest_point(view: BotView, i: int, e: int) -> int:
     return int(np.argmin(d))
 
 
-def _least_hp(view: BotView, i: int, live: np.ndarray) -> int:
-    me = view.poses[view.robots[i], :2]
-    dist = np.hypot(*(view.poses[view.enemies[live], :2] - me).T)
-    keys = np.lexsort((dist, view.hp[view.enemies[live]]))
+def _least_hp(view: BotView, live: np.ndarray) -> int:
+    """The live enemy with the least HP; ties go to the one nearest the whole team, so that
+    every robot of the team picks the same enemy and their fire is focused."""
+    mine = view.poses[view.robots[view.alive[view.robots]], :2]
+    enemies = view.poses[view.enemies[live], :2]
+    dist = np.hypot(*(enemies[:, None] - mine[None]).transpose(2, 0, 1)).sum(axis=1)
+    keys = np.lexsort((dist, np.round(view.hp[view.enemies[live]], 6)))
     return int(live[keys[0]])
 
 
@@ -104,8 +107,8 @@ class MiddleBot:
     def act(self, view: BotView) -> list[Choice]:
         live = _live(view)
         out = []
+        e = _least_hp(view, live)
         for i in range(len(view.robots)):
-            e = _least_hp(view, i, live)
             out.append((e, _nearest_point(view, i, e)))
         return out
 
