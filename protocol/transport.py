@@ -9,14 +9,24 @@ A Zenoh *router* is the one opt-in exception, for clients on other machines: a s
 also connect to routers (``server_config(..., routers=[...])``) and a client may connect to
 a router instead of the server (``client_config(..., router=...)``); the query then travels
 client → router → server, keyed by ``neuronsmae/<port>/rpc``. See ``deploy/README.md``.
+
+TLS: when the environment variable ``NEURONSMAE_ZENOH_TLS`` names a Zenoh JSON5 file, the
+``transport.link.tls`` section of that file (CA, own certificate and key, ``enable_mtls``)
+is copied into every session opened here, so servers and clients can reach a router that
+accepts mutual TLS only (``deploy/zenoh-router-tls.json5``) at a ``tls/host:port`` locator.
+Nothing else of the file is used: endpoints and discovery stay as described above.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Sequence
 
 import zenoh
+
+TLS_ENV = "NEURONSMAE_ZENOH_TLS"
+"""Environment variable naming a Zenoh JSON5 file whose ``transport.link.tls`` to use."""
 
 
 def endpoint(host: str, port: int) -> str:
@@ -31,6 +41,10 @@ def _base_config(mode: str) -> zenoh.Config:
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
+    tls_file = os.environ.get(TLS_ENV)
+    if tls_file:
+        tls = zenoh.Config.from_file(tls_file).get_json("transport/link/tls")
+        conf.insert_json5("transport/link/tls", tls)
     return conf
 
 
