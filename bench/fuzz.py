@@ -83,7 +83,7 @@ def _value(rng: random.Random, depth: int = 0) -> Any:
             (_scalar(rng) if rng.random() < 0.2 else str(_scalar(rng))): _value(rng, depth + 1)
             for _ in range(rng.randint(0, 4))
         }
-    return msgpack.ExtType(rng.choice([1, 2, 1, 3, -1, 127]), _ext_data(rng))
+    return msgpack.ExtType(rng.choice([1, 2, 1, 0, 3, 127]), _ext_data(rng))
 
 
 def _ext_data(rng: random.Random) -> bytes:
@@ -105,6 +105,8 @@ def valid_requests(session: str) -> list[dict[str, Any]]:
         {**env, "type": "step", "actions": [0, 0]},
         {**env, "type": "get", "what": "obs"},
         {**env, "type": "get", "what": "state"},
+        {**env, "type": "get", "what": "avail_actions"},
+        {**env, "type": "get", "what": "env_info"},
         {**env, "type": "render"},
         {**env, "type": "ping"},
         {**env, "type": "contexts"},
@@ -175,6 +177,7 @@ def _edge_cases() -> list[bytes]:
         b"\xc6\xff\xff\xff\xff\x00",  # bin32 claiming 4 GB
         b"\xdb\xff\xff\xff\xff\x00",  # str32 claiming 4 GB
         b"\xc9\xff\xff\xff\xff\x01",  # ext32 claiming 4 GB
+        b"\x84" + _pack(step)[1:] + b"\xa7actions\x91\xd6\xff\x00\x00\x00\x00",  # timestamp
         b"\x00" * (MAX_REQUEST_BYTES + 1),
         _pack({**step, "actions": [0] * (MAX_REQUEST_BYTES // 2)}),
         _pack({**step, "actions": [None] * (MAX_REQUEST_BYTES - 100)}),

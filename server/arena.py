@@ -167,6 +167,8 @@ class Arena(ArenaAPI):
         )
 
     def get_avail_actions(self) -> list[np.ndarray]:
+        if self._episodes == 0:  # no candidate goals yet: a typed error, not an AttributeError
+            raise ResetNeededError("get_avail_actions() needs an episode: call reset() first")
         alive = self.referee.alive
         return [
             self.decoder.mask(bool(alive[i]), alive[self.enemies_of[i]], self.valid[i])

@@ -9,6 +9,7 @@ certificate paths and the port replaced, on loopback. The last test runs a real
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -184,37 +185,41 @@ def _tls_file(path: Path, who: Identity, ca: Path) -> Path:
     return path
 
 
+def _rm_through(endpoint: str, port: int, patience: float = 30.0) -> RM:
+    """An RM to ``port`` via the router, once the server's link to the router is up (its
+    peer session connects in the background, after the server already answers directly)."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            return RM(seed=5, port=port, router=endpoint, timeout=5.0)
+        except ServerUnavailableError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
 def test_real_server_and_client_through_the_acl_router(
     pki: Pki, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    router, endpoint = _router("zenoh-router-tls.json5", pki)
+    router, endpoint = _router("zenoh-router-acl.json5", pki)
     try:
         monkeypatch.setenv(TLS_ENV, str(_tls_file(tmp_path / "server.json5", pki.server, pki.ca)))
         server = Server(free_port(), "--time-scale", "0", "--router", endpoint).wait_ready()
         try:
-            monkeypatch.delenv(TLS_ENV)
-            with pytest.raises(ServerUnavailableError, match="router"):
-                RM(port=server.port, router=endpoint, timeout=2.0)
-            client_file = _tls_file(tmp_path / "client.json5", pki.client, pki.ca)
-            monkeypatch.setenv(TLS_ENV, str(client_file))
-            import time
-            for name in ("tls",):
-                pass
-            deadline = time.monotonic() + 20
-            while True:
-                try:
-                    env = RM(seed=5, port=server.port, router=endpoint, timeout=2.0)
-                    break
-                except ServerUnavailableError as exc:
-                    print(time.monotonic(), exc)
-                    assert time.monotonic() < deadline
-            with env:
+            monkeypatch.setenv(TLS_ENV, str(_tls_file(tmp_path / "c.json5", pki.client, pki.ca)))
+            with _rm_through(endpoint, server.port) as env:
                 local = Arena(seed=5)
                 assert same(env.reset(), local.reset())
                 for _ in range(3):
                     actions = [int(np.flatnonzero(m)[0]) for m in local.get_avail_actions()]
                     assert same(env.step(actions), local.step(actions))
                 local.close()
+            monkeypatch.setenv(TLS_ENV, str(_tls_file(tmp_path / "m.json5", pki.monitor, pki.ca)))
+            with pytest.raises(ServerUnavailableError, match="no NeuronsMAE server answers"):
+                RM(port=server.port, router=endpoint, timeout=2.0)  # connected, but denied
+            monkeypatch.delenv(TLS_ENV)
+            with pytest.raises(ServerUnavailableError, match="cannot reach the Zenoh router"):
+                RM(port=server.port, router=endpoint, timeout=2.0)  # refused at the handshake
         finally:
             server.stop()
     finally:

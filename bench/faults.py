@@ -1,0 +1,334 @@
+"""Faults: kill a server, a Ray rollout worker and the learner; measure loss and recovery.
+
+    python -m bench.faults [--repeats 3] [--skip ray learner]
+
+1. **Server** (``--repeats`` times per case), run under the fleet supervisor
+   (``python -m neuronsmae.server.fleet``, checking every 0.5 s), which restarts it. A
+   client (``RM``, timeout 5 s) loses it with SIGKILL:
+   * *mid-step*: the server is paced (``--time-scale 1``: a decision lasts 0.4 s) and is
+     killed 0.2 s into answering a step;
+   * *mid-reset*: the server is frozen (SIGSTOP), sent a reset, then killed;
+   * *between episodes*: killed after an episode ended, before the next reset.
+   Measured: what the client raised and how long after the kill; how long until a reset
+   succeeds on the restarted server; whether the retried request said the episode was lost
+   (``ResetNeededError``); whether the new episode equals a fresh in-process ``Arena``.
+2. **Ray rollout worker**: ``ray.kill`` of a worker while it plays (as
+   tests/trainers/test_training.py does): restarts, time until the interrupted episodes
+   land (replayed whole on a fresh actor), and that no seed is stored twice or partially.
+3. **Learner**: ``neuronsmae-train`` SIGKILLed (its whole process group) some episodes after
+   a checkpoint, then ``--resume``: the episodes since the checkpoint and the replay buffer
+   are what is lost; measured: time to the first new episode, and the final counters.
+
+Writes bench/out/faults.json; exits 1 when a recovery fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.common import machine, table, write_json
+from neuronsmae.client import RM
+from neuronsmae.protocol.errors import ResetNeededError, ServerUnavailableError
+from neuronsmae.server.arena import Arena
+from tests.client.conftest import free_port, same
+
+TIMEOUT = 5.0
+PATIENCE = 120.0
+"""Seconds any single recovery may take before it counts as failed."""
+
+
+# ---- 1. servers ----------------------------------------------------------------------------
+
+
+class Supervised:
+    """``neuronsmae-serve`` with one server; it restarts the server when it dies."""
+
+    def __init__(self, port: int, time_scale: float, folder: Path) -> None:
+        self.port, self.state = port, folder / f"state-{port}.json"
+        cmd = [sys.executable, "-m", "neuronsmae.server.fleet", "--base-port", str(port),
+               "--count", "1", "--time-scale", str(time_scale), "--interval", "0.5",
+               "--state-file", str(self.state), "--log-dir", str(folder)]  # fmt: skip
+        self.log = (folder / f"fleet-{port}.log").open("wb")
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
+                                     stderr=self.log, start_new_session=True)  # fmt: skip
+
+    def server_pid(self, other_than: int | None = None) -> int:
+        """The running server's pid (a new one, when ``other_than`` is given)."""
+        deadline = time.monotonic() + PATIENCE
+        while time.monotonic() < deadline:
+            try:
+                pid = json.loads(self.state.read_text())["servers"][0]["pid"]
+            except (OSError, ValueError, KeyError, IndexError):
+                pid = None
+            if pid and pid != other_than:
+                return int(pid)
+            time.sleep(0.1)
+        raise RuntimeError(f"the supervisor on {self.port} never reported a server")
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.log.close()
+
+
+def _until(call: Callable[[], Any], patience: float = PATIENCE) -> Any:
+    """``call()`` again every 0.1 s while the server is unavailable."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            return call()
+        except ServerUnavailableError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+
+
+def _allowed(arena: Any) -> list[int]:
+    return [int(np.flatnonzero(m)[0]) for m in arena.get_avail_actions()]
+
+
+def server_case(case: str, sup: Supervised, seed: int) -> dict[str, Any]:
+    """Kill the supervised server as ``case`` says; what the client saw, and recovery."""
+    pid = sup.server_pid()
+    env = _until(lambda: RM(seed=seed, port=sup.port, launch=False, timeout=TIMEOUT))
+    outcome: dict[str, Any] = {}
+    try:
+        env.reset()
+        played = 0
+        if case == "between episodes":
+            while not env.step(_allowed(env))[2]:
+                played += 1
+            played = 0  # the episode ended: nothing is in flight
+        else:
+            for _ in range(3):
+                env.step(_allowed(env))
+                played += 1
+        if case == "mid-reset":
+            os.kill(pid, signal.SIGSTOP)
+        call = env.reset if case != "mid-step" else lambda: env.step(_allowed(env))
+        if case == "between episodes":
+            killed = time.monotonic()
+            os.kill(pid, signal.SIGKILL)
+            _attempt(call, outcome)
+        else:
+            worker = threading.Thread(target=_attempt, args=(call, outcome))
+            worker.start()
+            time.sleep(0.2 if case == "mid-step" else 0.3)  # mid-step: half a 0.4 s decision
+            killed = time.monotonic()
+            os.kill(pid, signal.SIGKILL)
+            worker.join(TIMEOUT + 5)
+        sup.server_pid(other_than=pid)  # the supervisor has started a new one
+        try:
+            _until(lambda: env.step(_allowed(env)))
+            lost_confirmed = False
+        except ResetNeededError:
+            lost_confirmed = True
+        reachable = time.monotonic() - killed
+        local = Arena(seed=seed)
+        identical = same(env.reset(), local.reset())
+        recovered = time.monotonic() - killed
+        for _ in range(5):
+            actions = _allowed(local)
+            identical &= same(env.step(actions), local.step(actions))
+        local.close()
+    finally:
+        env.close()
+    return {
+        "case": case,
+        "client_error": type(outcome.get("error")).__name__,
+        "error_after_s": outcome.get("at", float("nan")) - killed,
+        "decisions_lost": played,
+        "retry_said_reset_needed": lost_confirmed,
+        "reachable_after_s": reachable,
+        "new_episode_after_s": recovered,
+        "new_episode_identical": identical,
+    }
+
+
+def _attempt(call: Callable[[], Any], out: dict[str, Any]) -> None:
+    try:
+        call()
+    except ServerUnavailableError as exc:
+        out["error"] = exc
+    out["at"] = time.monotonic()
+
+
+def servers(repeats: int, folder: Path) -> list[dict[str, Any]]:
+    rows = []
+    for time_scale, cases in ((1.0, ["mid-step"]), (0.0, ["mid-reset", "between episodes"])):
+        sup = Supervised(free_port(), time_scale, folder)
+        try:
+            for case in cases:
+                for r in range(repeats):
+                    rows.append(server_case(case, sup, seed=10 + r))
+                    print(f"server {case} #{r}: {rows[-1]}", flush=True)
+        finally:
+            sup.stop()
+    return rows
+
+
+# ---- 2. a Ray rollout worker ---------------------------------------------------------------
+
+
+def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
+    import ray
+
+    from neuronsmae.trainers.config import make_config
+    from neuronsmae.trainers.train import Trainer, train_seed
+    from tests.trainers.test_training import TINY
+
+    base = {"alg": "vdn", "workers": 2, "episodes": episodes, "out": str(folder / "ray"),
+            "progress": False, "eval_every": 0, "final_eval_episodes": 2}  # fmt: skip
+    cfg = make_config(base, dict(kv.split("=") for kv in TINY))
+    state: dict[str, Any] = {}
+
+    def hook(trainer: Trainer) -> None:
+        now = time.monotonic()
+        if "killed_at" not in state:
+            mine = [t for t in trainer.sampler.in_flight.values() if t.worker == 0]
+            if trainer.counters.episodes >= 4 and mine:
+                state["seeds"] = {t.request.seed for t in mine}
+                ray.kill(trainer.sampler.actors[0])  # dies while playing those episodes
+                state["killed_at"] = now
+        elif "recovered_at" not in state and state["seeds"] <= set(trainer.stored_seeds):
+            state["recovered_at"] = now
+
+    t0 = time.monotonic()
+    trainer = Trainer(cfg, hook=hook)
+    result = trainer.run()
+    expected = sorted(train_seed(cfg.seed, k, cfg.eval_seed) for k in range(episodes))
+    buf, partial = trainer.buffer, 0
+    for i in range(len(buf)):  # a stored episode is filled up to its length and no further
+        n = int(buf.lengths[i])
+        partial += not (buf.filled[i, :n].all() and not buf.filled[i, n:].any())
+    return {
+        "episodes": result["counters"]["episodes"],
+        "restarts": result["counters"]["restarts"],
+        "episodes_interrupted": len(state.get("seeds", ())),
+        "replayed_after_s": state.get("recovered_at", float("nan")) - state["killed_at"],
+        "every_seed_stored_once": sorted(trainer.stored_seeds) == expected,
+        "partial_episodes_stored": int(partial),
+        "run_wall_s": time.monotonic() - t0,
+    }
+
+
+# ---- 3. the learner ------------------------------------------------------------------------
+
+
+def _csv_last(path: Path, column: str) -> int:
+    try:
+        with path.open() as f:
+            rows = list(csv.DictReader(f))
+        return int(rows[-1][column]) if rows else 0
+    except (OSError, KeyError, ValueError):
+        return 0
+
+
+def _checkpoint_episodes(run: Path) -> int:
+    import torch
+
+    try:
+        return int(torch.load(run / "checkpoint.pt", weights_only=True)["counters"]["episodes"])
+    except (OSError, RuntimeError, EOFError, KeyError):
+        return 0
+
+
+def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]:
+    from tests.trainers.test_training import TINY
+
+    run = folder / "learner"
+    sets = [a for kv in (*TINY, f"checkpoint_every={every}") for a in ("--set", kv)]
+    cmd = [sys.executable, "-m", "neuronsmae.trainers.cli", "--alg", "vdn", "--level", "easy",
+           "--workers", "1", "--episodes", str(episodes), "--out", str(run), "--quiet",
+           *sets]  # fmt: skip
+    log = (folder / "learner.log").open("wb")
+    first = subprocess.Popen(cmd, stdout=log, stderr=log, start_new_session=True)
+    deadline = time.monotonic() + 600
+    while True:  # a checkpoint, then some episodes past it
+        ckpt = _checkpoint_episodes(run)
+        if ckpt >= every and _csv_last(run / "train.csv", "episodes") >= ckpt + every // 2:
+            break
+        if first.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"the first run ended or stalled; see {folder / 'learner.log'}")
+        time.sleep(0.2)
+    at_kill = _csv_last(run / "train.csv", "episodes")
+    os.killpg(first.pid, signal.SIGKILL)  # the learner and everything it started
+    first.wait()
+    ckpt = _checkpoint_episodes(run)
+    t0 = time.monotonic()
+    resume = [sys.executable, "-m", "neuronsmae.trainers.cli", "--resume", "--out", str(run),
+              "--quiet"]  # fmt: skip
+    second = subprocess.Popen(resume, stdout=log, stderr=log, start_new_session=True)
+    first_new = None
+    while second.poll() is None and time.monotonic() - t0 < 900:
+        if first_new is None and _csv_last(run / "train.csv", "episodes") > at_kill:
+            first_new = time.monotonic() - t0
+        time.sleep(0.2)
+    code = second.wait(60)
+    log.close()
+    import torch
+
+    final = torch.load(run / "checkpoint.pt", weights_only=True)["counters"]
+    return {
+        "episodes_at_kill": at_kill,
+        "checkpoint_episodes": ckpt,
+        "episodes_lost": at_kill - ckpt,
+        "resume_exit_status": code,
+        "resume_to_new_episode_s": first_new,
+        "resume_to_finish_s": time.monotonic() - t0,
+        "final_episodes": final["episodes"],
+        "final_updates": final["updates"],
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--skip", nargs="*", default=[], choices=["servers", "ray", "learner"])
+    args = parser.parse_args()
+    report: dict[str, Any] = {"machine": machine(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        if "servers" not in args.skip:
+            rows = servers(args.repeats, folder)
+            report["servers"] = rows
+            print(table(rows, ["case", "client_error", "error_after_s", "decisions_lost",
+                               "retry_said_reset_needed", "new_episode_after_s",
+                               "new_episode_identical"]))  # fmt: skip
+            ok &= all(r["client_error"] == "ServerUnavailableError" and r["error_after_s"] < TIMEOUT
+                      and r["new_episode_identical"] for r in rows)  # fmt: skip
+        if "ray" not in args.skip:
+            report["ray_worker"] = ray_worker(folder)
+            print("ray worker:", report["ray_worker"])
+            ok &= report["ray_worker"]["every_seed_stored_once"]
+            ok &= report["ray_worker"]["partial_episodes_stored"] == 0
+        if "learner" not in args.skip:
+            report["learner"] = learner(folder)
+            print("learner:", report["learner"])
+            ok &= report["learner"]["resume_exit_status"] == 0
+    report["ok"] = ok
+    print(f"wrote {write_json('faults', report)}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
