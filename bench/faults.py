@@ -115,12 +115,13 @@ def server_case(case: str, sup: Supervised, seed: int) -> dict[str, Any]:
         played = 0
         if case == "between episodes":
             while not env.step(_allowed(env))[2]:
-                played += 1
-            played = 0  # the episode ended: nothing is in flight
+                pass  # to the end of the episode: then nothing is in flight
         else:
             for _ in range(3):
                 env.step(_allowed(env))
                 played += 1
+        if case == "mid-reset":
+            played = 0  # the episode being started is lost, with no decisions yet
         if case == "mid-reset":
             os.kill(pid, signal.SIGSTOP)
         call = env.reset if case != "mid-step" else lambda: env.step(_allowed(env))
@@ -154,7 +155,8 @@ def server_case(case: str, sup: Supervised, seed: int) -> dict[str, Any]:
     return {
         "case": case,
         "client_error": type(outcome.get("error")).__name__,
-        "error_after_s": outcome.get("at", float("nan")) - killed,
+        "error_after_ms": 1000 * (outcome.get("at", float("nan")) - killed),
+        "in_flight": {"mid-step": "step", "mid-reset": "reset"}.get(case, "nothing"),
         "decisions_lost": played,
         "retry_said_reset_needed": lost_confirmed,
         "reachable_after_s": reachable,
@@ -311,10 +313,11 @@ def main() -> int:
         if "servers" not in args.skip:
             rows = servers(args.repeats, folder)
             report["servers"] = rows
-            print(table(rows, ["case", "client_error", "error_after_s", "decisions_lost",
-                               "retry_said_reset_needed", "new_episode_after_s",
-                               "new_episode_identical"]))  # fmt: skip
-            ok &= all(r["client_error"] == "ServerUnavailableError" and r["error_after_s"] < TIMEOUT
+            print(table(rows, ["case", "in_flight", "client_error", "error_after_ms",
+                               "decisions_lost", "retry_said_reset_needed", "reachable_after_s",
+                               "new_episode_after_s", "new_episode_identical"]))  # fmt: skip
+            ok &= all(r["client_error"] == "ServerUnavailableError"
+                      and r["error_after_ms"] < 1000 * TIMEOUT
                       and r["new_episode_identical"] for r in rows)  # fmt: skip
         if "ray" not in args.skip:
             report["ray_worker"] = ray_worker(folder)

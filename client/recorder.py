@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError
-from neuronsmae.protocol.interface import Action, ArenaAPI
+from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
 from neuronsmae.protocol.recording import (
     SUFFIX,
     Decision,
@@ -29,6 +29,7 @@ from neuronsmae.protocol.recording import (
     decision_hash,
     to_plain,
 )
+from neuronsmae.protocol.wrappers import ArenaWrapper
 
 Select = Callable[[int, Mapping[str, Any] | None], bool]
 """``select(seed, contexts)``: whether to record the episode about to start."""
@@ -51,7 +52,8 @@ def arena_identity(env: ArenaAPI) -> tuple[int, dict[str, Any]]:
     return int(seed), dict(options)
 
 
-class Recorder(ArenaAPI):
+@inherit_docstrings
+class Recorder(ArenaWrapper):
     """Records the episodes played through it, one file each, into ``out_dir``.
 
     ``select(seed, contexts)`` picks which episodes to record (default: all) and ``limit``
@@ -141,21 +143,6 @@ class Recorder(ArenaAPI):
                 self._finish()
         return obs, rewards, done, info
 
-    def get_obs(self) -> list[np.ndarray]:
-        return self.env.get_obs()
-
-    def get_state(self) -> np.ndarray:
-        return self.env.get_state()
-
-    def get_avail_actions(self) -> list[np.ndarray]:
-        return self.env.get_avail_actions()
-
-    def get_env_info(self) -> dict[str, Any]:
-        return self.env.get_env_info()
-
-    def render(self) -> np.ndarray:
-        return self.env.render()
-
     def close(self) -> None:
         # The current file first (kept, cut short), then the wrapped arena.
         self._finish()
@@ -166,9 +153,3 @@ class Recorder(ArenaAPI):
         if name == "env":  # not set yet: __init__ failed before it
             raise AttributeError(name)
         return getattr(self.env, name)
-
-
-for _name in ArenaAPI.__abstractmethods__:  # same contract, same help() text
-    _method = Recorder.__dict__.get(_name)
-    if _method is not None and not _method.__doc__:
-        _method.__doc__ = getattr(ArenaAPI, _name).__doc__

@@ -27,7 +27,7 @@ from neuronsmae.protocol.errors import (
     ServerUnavailableError,
     error_from_code,
 )
-from neuronsmae.protocol.interface import Action, ArenaAPI
+from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
 from neuronsmae.protocol.messages import (
     MAX_REQUEST_BYTES,
     NOT_CONFIGURED,
@@ -51,16 +51,6 @@ CLOSE_TIMEOUT = 1.0
 """Seconds ``close`` waits for the server to acknowledge, so closing never hangs."""
 
 
-def _inherit_docstrings(cls: type) -> type:
-    """Give each overriding method the docstring of the ArenaAPI method it implements, so
-    ``help(RM.step)`` tells the same contract as ``help(Arena.step)``."""
-    for name in ArenaAPI.__abstractmethods__:
-        method = cls.__dict__.get(name)
-        if method is not None and not method.__doc__:
-            method.__doc__ = getattr(ArenaAPI, name).__doc__
-    return cls
-
-
 def _shutdown(link: Link, server: ServerProcess | None, farewell: bytes | None) -> None:
     """Release the server and the session (runs once, from close() or garbage collection)."""
     try:
@@ -74,7 +64,7 @@ def _shutdown(link: Link, server: ServerProcess | None, farewell: bytes | None) 
             server.stop()
 
 
-@_inherit_docstrings
+@inherit_docstrings
 class RM(ArenaAPI):
     """A remote arena on ``tcp/host:port``; started locally if nothing answers there.
 

@@ -97,3 +97,14 @@ class ArenaAPI(abc.ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def inherit_docstrings(cls: type) -> type:
+    """Class decorator: each method overriding an :class:`ArenaAPI` method without a
+    docstring of its own gets the interface's, so ``help(RM.step)``, ``help(Arena.step)``
+    and a wrapper's ``step`` all tell the same contract."""
+    for name in ArenaAPI.__abstractmethods__:
+        method = cls.__dict__.get(name)
+        if method is not None and not method.__doc__:
+            method.__doc__ = getattr(ArenaAPI, name).__doc__
+    return cls

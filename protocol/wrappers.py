@@ -13,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 
 
+@inherit_docstrings
 class ArenaWrapper(ArenaAPI):
     """Forwards everything to ``env``; subclasses override what they change."""
 
@@ -51,6 +52,7 @@ class ArenaWrapper(ArenaAPI):
         self.env.close()
 
 
+@inherit_docstrings
 class RewardWrapper(ArenaWrapper):
     """Replace each step's rewards with :meth:`reward` of the original ones and ``info``."""
 

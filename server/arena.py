@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.errors import ResetNeededError
-from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.contexts import EpisodeContext, parse_contexts
 from neuronsmae.server.render import render_scene
@@ -44,6 +44,7 @@ auto-turn are recomputed this often and held in between, like the released build
 discrete decisions."""
 
 
+@inherit_docstrings
 class Arena(ArenaAPI):
     """One battle on the RMUA field, simulated in this process.
 

@@ -44,8 +44,9 @@ class Zones:
         self.n = n_robots
         hx, hy = F.ZONE_SIZE_RMUA[0] / 2, F.ZONE_SIZE_RMUA[1] / 2
         centres = np.array([F.ZONES[z] for z in ZONE_NAMES])
-        self.lo = centres - (hx, hy)
-        self.hi = centres + (hx, hy)
+        half = np.array([hx, hy])
+        self.lo = centres - half
+        self.hi = centres + half
         self.state = ZoneState()
 
     def reset(self) -> None:

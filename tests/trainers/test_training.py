@@ -98,7 +98,8 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     trainer = Trainer(cfg)
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
-    assert trainer.learner.updates == 2  # one training round per iteration of 2 episodes
+    # one training round per iteration of 2 episodes (the first fills learning_starts)
+    assert trainer.learner.updates == 2 * cfg.updates_per_round
 
 
 def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: Path) -> None:
