@@ -235,13 +235,13 @@ def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
 # ---- 3. the learner ------------------------------------------------------------------------
 
 
-def _csv_last(path: Path, column: str) -> int:
+def _episodes_logged(path: Path) -> list[int]:
+    """The ``episodes`` column of train.csv (one row per training round)."""
     try:
         with path.open() as f:
-            rows = list(csv.DictReader(f))
-        return int(rows[-1][column]) if rows else 0
+            return [int(row["episodes"]) for row in csv.DictReader(f)]
     except (OSError, KeyError, ValueError):
-        return 0
+        return []
 
 
 def _checkpoint_episodes(run: Path) -> int:
@@ -266,23 +266,28 @@ def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]
     deadline = time.monotonic() + 600
     while True:  # a checkpoint, then some episodes past it
         ckpt = _checkpoint_episodes(run)
-        if ckpt >= every and _csv_last(run / "train.csv", "episodes") >= ckpt + every // 2:
+        logged = _episodes_logged(run / "train.csv")
+        if ckpt >= every and logged and logged[-1] >= ckpt + every // 2:
             break
         if first.poll() is not None or time.monotonic() > deadline:
             raise RuntimeError(f"the first run ended or stalled; see {folder / 'learner.log'}")
         time.sleep(0.2)
-    at_kill = _csv_last(run / "train.csv", "episodes")
+    at_kill = _episodes_logged(run / "train.csv")[-1]
     os.killpg(first.pid, signal.SIGKILL)  # the learner and everything it started
     first.wait()
     ckpt = _checkpoint_episodes(run)
+    rows_before = len(_episodes_logged(run / "train.csv"))
     t0 = time.monotonic()
     resume = [sys.executable, "-m", "neuronsmae.trainers.cli", "--resume", "--out", str(run),
               "--quiet"]  # fmt: skip
     second = subprocess.Popen(resume, stdout=log, stderr=log, start_new_session=True)
-    first_new = None
+    first_new = caught_up = None  # the first episode after resuming; the first past at_kill
     while second.poll() is None and time.monotonic() - t0 < 900:
-        if first_new is None and _csv_last(run / "train.csv", "episodes") > at_kill:
+        new = _episodes_logged(run / "train.csv")[rows_before:]
+        if first_new is None and new:
             first_new = time.monotonic() - t0
+        if caught_up is None and new and max(new) > at_kill:
+            caught_up = time.monotonic() - t0
         time.sleep(0.2)
     code = second.wait(60)
     log.close()
@@ -294,7 +299,8 @@ def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]
         "checkpoint_episodes": ckpt,
         "episodes_lost": at_kill - ckpt,
         "resume_exit_status": code,
-        "resume_to_new_episode_s": first_new,
+        "resume_to_first_episode_s": first_new,
+        "resume_to_past_the_kill_s": caught_up,
         "resume_to_finish_s": time.monotonic() - t0,
         "final_episodes": final["episodes"],
         "final_updates": final["updates"],
