@@ -122,3 +122,19 @@ def evaluate_checkpoint(
         "alg": payload["config"]["alg"],
         "episodes_trained": payload["counters"]["episodes"],
     }
+
+
+class MatchPolicy(GreedyPolicy):
+    """A checkpoint in the shape ``neuronsmae-match --blue CHECKPOINT`` expects.
+
+    Registered as the ``neuronsmae.policies`` entry point, so the match command (in the
+    server package, which must not import the trainers) finds it by name.
+    """
+
+    options: dict[str, Any] = {"action_space": "abstract"}  # noqa: RUF012
+    """Arena options the trainers' agents are built for (abstract 2 v 2, cooperative)."""
+
+    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray],
+            state: Any = None) -> list[int]:
+        """Greedy actions; the global state is not needed by decentralised agents."""
+        return super().act(obs, avail)

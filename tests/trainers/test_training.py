@@ -68,6 +68,13 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     assert second["counters"]["episodes"] == 12
     assert second["counters"]["updates"] > first["counters"]["updates"]
     assert second["counters"]["env_steps"] > first["counters"]["env_steps"]
+
+    # The match command plays the checkpoint through the registered policy entry point.
+    from neuronsmae.server.match import play
+
+    result = play(str(out / "checkpoint.pt"), "easy", 2, 1_000_000_000)
+    assert result["episodes"] == 2
+    assert result["blue_win_rate"] + result["red_win_rate"] + result["draw_rate"] == 1.0
     assert second["config"]["agent_hidden"] == 16  # the saved config was kept
     steps = _episodes_column(out / "train.csv")
     assert steps == sorted(steps) and steps[-1] == 12
