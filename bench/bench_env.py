@@ -81,10 +81,10 @@ def bare_runners(seed: int = 0):
         vel = [(*rng.uniform(-1.5, 1.5, 2), 0.0) for _ in bodies]
         for _ in range(20):
             for b, v in zip(bodies, vel, strict=True):
-                pb.resetBaseVelocity(b, v, (0.0, 0.0, 0.5), physicsClientId=cid)
+                pb.resetBaseVelocity(b, v, (0.0, 0.0, 0.5), cid)
             pb.stepSimulation(physicsClientId=cid)
             for b in bodies:
-                pb.getBasePositionAndOrientation(b, physicsClientId=cid)
+                pb.getBasePositionAndOrientation(b, cid)
         return 1
 
     return {"bare step": step_only, "bare drive": drive}

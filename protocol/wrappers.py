@@ -75,14 +75,17 @@ class CollisionPenalty(RewardWrapper):
     robots in competitive mode), since ``info`` lists every robot, blue first.
     """
 
-    def __init__(self, env: ArenaAPI, penalty: float = 0.1,
-                 agents: Sequence[int] | None = None) -> None:
+    def __init__(
+        self, env: ArenaAPI, penalty: float = 0.1, agents: Sequence[int] | None = None
+    ) -> None:
         super().__init__(env)
         self.penalty = penalty
-        self.agents = list(agents) if agents is not None else list(
-            range(env.get_env_info()["n_agents"]))
+        self.agents = (
+            list(agents) if agents is not None else list(range(env.get_env_info()["n_agents"]))
+        )
 
     def reward(self, rewards: list[float], info: dict[str, Any]) -> list[float]:
         contacts = info["contacts"]
-        return [r - self.penalty * (contacts[i] > 0) for r, i in zip(rewards, self.agents,
-                                                                       strict=True)]
+        return [
+            r - self.penalty * (contacts[i] > 0) for r, i in zip(rewards, self.agents, strict=True)
+        ]

@@ -118,7 +118,8 @@ class Arena(ArenaAPI):
             self.zones.reset()
         self.bots = {
             BLUE: make_bot(cfg.blue_level, self.rng) if cfg.mode == "bots" else None,
-            RED: make_bot(ctx.level, self.rng) if cfg.mode == "cooperative" or cfg.mode == "bots"
+            RED: make_bot(ctx.level, self.rng)
+            if cfg.mode == "cooperative" or cfg.mode == "bots"
             else None,
         }
         self.t = 0
@@ -150,8 +151,11 @@ class Arena(ArenaAPI):
         self._perceive()
         rewards = [float(team_r[self.team[i]]) for i in self.agents]
         info = self.referee.info() | {
-            "t": self.t, "components": parts, "team_reward": team_r.tolist(),
-            "targets": self.targets.tolist(), "contacts": self.world.contacts(),
+            "t": self.t,
+            "components": parts,
+            "team_reward": team_r.tolist(),
+            "targets": self.targets.tolist(),
+            "contacts": self.world.contacts(),
         }
         if self.zones is not None:
             info |= self.zones.info()
@@ -163,7 +167,9 @@ class Arena(ArenaAPI):
     def get_state(self) -> np.ndarray:
         ref = self.referee
         return O.global_state(
-            O.norm_pose(self.poses), O.norm_hp(ref.hp, ref.max_hp), O.norm_bullets(ref.bullets),
+            O.norm_pose(self.poses),
+            O.norm_hp(ref.hp, ref.max_hp),
+            O.norm_bullets(ref.bullets),
             O.norm_time(self.t, self.config.episode_steps),
         )
 
@@ -184,8 +190,9 @@ class Arena(ArenaAPI):
             "n_actions": n_actions(cfg.action_space, n_enemy, cfg.k),
             "n_agents": len(self.agents),
             "state_shape": O.state_size(self.n),
-            "obs_shape": O.obs_size(n_team, n_enemy, cfg.k, cfg.with_candidates,
-                                    cfg.vector_obs, cfg.lidar),
+            "obs_shape": O.obs_size(
+                n_team, n_enemy, cfg.k, cfg.with_candidates, cfg.vector_obs, cfg.lidar
+            ),
             "episode_limit": -(-cfg.episode_steps // cfg.period),
             "action_space": cfg.action_space,
             "agents": [self.agent_name(i) for i in self.agents],
@@ -252,8 +259,14 @@ class Arena(ArenaAPI):
         self.cands, self.valid = P.all_candidates(
             self.poses, ref.alive, self.enemies_of, cfg.k, self._wanted()
         )
-        seen = P.sight(self.poses, ref.alive, self.targets, self.enemies_of,
-                       np.deg2rad(cfg.camera_hfov_deg), cfg.observability == "partial")
+        seen = P.sight(
+            self.poses,
+            ref.alive,
+            self.targets,
+            self.enemies_of,
+            np.deg2rad(cfg.camera_hfov_deg),
+            cfg.observability == "partial",
+        )
         poses_n = O.norm_pose(self.poses)
         hp_n = O.norm_hp(ref.hp, ref.max_hp)
         bul_n = O.norm_bullets(ref.bullets)
@@ -264,8 +277,19 @@ class Arena(ArenaAPI):
             if cfg.vector_obs:
                 order = np.concatenate([self.mates_of[i], self.enemies_of[i]])
                 cands_n = O.norm_xy(self.cands[i]) if cfg.with_candidates else None
-                parts.append(O.vector_obs(order, len(self.mates_of[i]), poses_n, cands_n, t_n,
-                                          hp_n, bul_n, seen[i], cfg.unseen_value))
+                parts.append(
+                    O.vector_obs(
+                        order,
+                        len(self.mates_of[i]),
+                        poses_n,
+                        cands_n,
+                        t_n,
+                        hp_n,
+                        bul_n,
+                        seen[i],
+                        cfg.unseen_value,
+                    )
+                )
             if cfg.lidar:
                 parts.append(P.lidar(self.poses, i, cfg.lidar_range))
             obs.append(np.concatenate(parts).astype(np.float32))
@@ -282,12 +306,18 @@ class Arena(ArenaAPI):
             robots = np.flatnonzero(self.team == team)
             if not self.referee.alive[robots].any():
                 continue
-            view = BotView(robots, self.enemies_of[robots[0]], self.poses, self.referee.hp,
-                           self.referee.max_hp, self.referee.alive, self.cands[robots],
-                           self.valid[robots])
+            view = BotView(
+                robots,
+                self.enemies_of[robots[0]],
+                self.poses,
+                self.referee.hp,
+                self.referee.max_hp,
+                self.referee.alive,
+                self.cands[robots],
+                self.valid[robots],
+            )
             for r, (e, c) in zip(robots, bot.act(view), strict=True):
-                intents[r] = Intent(int(self.enemies_of[r][e]), KIND_GOAL,
-                                    goal=self.cands[r, e, c])
+                intents[r] = Intent(int(self.enemies_of[r][e]), KIND_GOAL, goal=self.cands[r, e, c])
         result = []
         for i, intent in enumerate(intents):
             assert intent is not None

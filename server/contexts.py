@@ -31,8 +31,9 @@ class ContextKey:
 
 
 DYNAMICS_KEYS: tuple[ContextKey, ...] = (
-    ContextKey("Friction_coeff", 0.1, 0.0, 2.0, "sliding friction μ (rolling is 0.8μ)",
-               "friction_coeff"),
+    ContextKey(
+        "Friction_coeff", 0.1, 0.0, 2.0, "sliding friction μ (rolling is 0.8μ)", "friction_coeff"
+    ),
     ContextKey("KP", 8.0, 0.0, 200.0, "wheel PID proportional gain", "kp"),
     ContextKey("KI", 0.0, 0.0, 200.0, "wheel PID integral gain", "ki"),
     ContextKey("KD", 2.0, 0.0, 200.0, "wheel PID derivative gain", "kd"),
@@ -49,8 +50,13 @@ OTHER_KEYS: tuple[ContextKey, ...] = (
     ContextKey("opponent_speed", 1.0, 0.1, 3.0, "multiplies the red robots' velocity commands"),
 )
 LEVELS: dict[Any, str] = {
-    0: "easy", 1: "middle", 2: "hard",
-    "easy": "easy", "middle": "middle", "hard": "hard", "random": "random",
+    0: "easy",
+    1: "middle",
+    2: "hard",
+    "easy": "easy",
+    "middle": "middle",
+    "hard": "hard",
+    "random": "random",
 }
 """Accepted ``level`` values: numbers 0/1/2 (also as floats) or names."""
 DEFAULT_LEVEL = "easy"
@@ -74,8 +80,11 @@ class EpisodeContext:
 
     def to_dict(self) -> dict[str, Any]:
         """The contexts as given to reset (released names), for records and replays."""
-        out: dict[str, Any] = {"coef": self.coef, "opponent_hp": self.opponent_hp,
-                               "level": self.level}
+        out: dict[str, Any] = {
+            "coef": self.coef,
+            "opponent_hp": self.opponent_hp,
+            "level": self.level,
+        }
         for key in DYNAMICS_KEYS:
             assert key.chassis_field is not None
             out[key.name] = self.blue_dynamics[key.chassis_field]
@@ -90,8 +99,14 @@ def context_table() -> list[dict[str, Any]]:
         {"key": name, "default": k.default, "min": k.lo, "max": k.hi, "doc": k.doc}
         for name, k in CONTEXT_TABLE.items()
     ]
-    rows.append({"key": "level", "default": DEFAULT_LEVEL, "choices": sorted(map(str, LEVELS)),
-                 "doc": "opponent bot: 0/easy, 1/middle, 2/hard, or random"})
+    rows.append(
+        {
+            "key": "level",
+            "default": DEFAULT_LEVEL,
+            "choices": sorted(map(str, LEVELS)),
+            "doc": "opponent bot: 0/easy, 1/middle, 2/hard, or random",
+        }
+    )
     return rows
 
 
@@ -112,9 +127,7 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
             raise InvalidContextError(f"unknown context key {key!r}; valid keys: {valid}")
         values[key] = _check_value(key, value, spec)
     blue = {k.chassis_field: values.get(k.name, k.default) for k in DYNAMICS_KEYS}
-    red = {
-        k.chassis_field: values.get(OPPONENT_PREFIX + k.name, k.default) for k in DYNAMICS_KEYS
-    }
+    red = {k.chassis_field: values.get(OPPONENT_PREFIX + k.name, k.default) for k in DYNAMICS_KEYS}
     red["speed_scale"] = values.get("opponent_speed", 1.0)
     return EpisodeContext(
         blue_dynamics=blue,  # type: ignore[arg-type]

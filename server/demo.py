@@ -29,14 +29,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             _, _, done, info = arena.step([])
             decisions += 1
         wall = time.perf_counter() - start
-    print(f"blue ({args.blue}) vs red ({args.red}), seed {args.seed}: winner {info['winner']} "
-          f"after {info['t'] * 0.02:.1f} s simulated, {wall:.2f} s wall ({decisions} decisions)")
+    print(
+        f"blue ({args.blue}) vs red ({args.red}), seed {args.seed}: winner {info['winner']} "
+        f"after {info['t'] * 0.02:.1f} s simulated, {wall:.2f} s wall ({decisions} decisions)"
+    )
     names = [f"blue_{i}" for i in range(2)] + [f"red_{i}" for i in range(2)]
     print(f"{'robot':8s} {'HP':>6s} {'bullets':>8s} {'dealt':>7s} {'taken':>7s} {'kills':>6s}")
     for k, name in enumerate(names):
-        print(f"{name:8s} {info['hp'][k]:6.0f} {info['bullets'][k]:8d} "
-              f"{info['damage_dealt'][k]:7.1f} {info['damage_taken'][k]:7.1f} "
-              f"{info['kills'][k]:6d}")
+        print(
+            f"{name:8s} {info['hp'][k]:6.0f} {info['bullets'][k]:8d} "
+            f"{info['damage_dealt'][k]:7.1f} {info['damage_taken'][k]:7.1f} "
+            f"{info['kills'][k]:6d}"
+        )
     return 0
 
 

@@ -134,7 +134,8 @@ class MatchPolicy(GreedyPolicy):
     options: dict[str, Any] = {"action_space": "abstract"}  # noqa: RUF012
     """Arena options the trainers' agents are built for (abstract 2 v 2, cooperative)."""
 
-    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray],
-            state: Any = None) -> list[int]:
+    def act(
+        self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray], state: Any = None
+    ) -> list[int]:
         """Greedy actions; the global state is not needed by decentralised agents."""
         return super().act(obs, avail)

@@ -73,10 +73,26 @@ class Referee:
         Returns how many robots were destroyed in this step.
         """
         draws = self.rng.random(self.n) if self.sampled else _NO_DRAWS
-        destroyed = fire(poses, self.alive, self.bullets, self.hp, targets, self.team, self.scale,
-                    self.static_boxes, self._robot_boxes, F.ARMOR_TABLE, draws,
-                    self.last_plate, self._dist, self.damage_dealt, self.damage_taken,
-                    self.kills, tally.damage, tally.kills)
+        destroyed = fire(
+            poses,
+            self.alive,
+            self.bullets,
+            self.hp,
+            targets,
+            self.team,
+            self.scale,
+            self.static_boxes,
+            self._robot_boxes,
+            F.ARMOR_TABLE,
+            draws,
+            self.last_plate,
+            self._dist,
+            self.damage_dealt,
+            self.damage_taken,
+            self.kills,
+            tally.damage,
+            tally.kills,
+        )
         if destroyed:
             self._both_alive = bool(
                 self.alive[: self.n_blue].any() and self.alive[self.n_blue :].any()
@@ -96,8 +112,9 @@ class Referee:
         else:
             blue_hp = self.hp[self.team == BLUE].sum()
             red_hp = self.hp[self.team == RED].sum()
-            self.winner = "draw" if np.isclose(blue_hp, red_hp) else (
-                "blue" if blue_hp > red_hp else "red")
+            self.winner = (
+                "draw" if np.isclose(blue_hp, red_hp) else ("blue" if blue_hp > red_hp else "red")
+            )
         return True
 
     def team_rewards(self, tally: StepTally, dense: bool) -> tuple[np.ndarray, dict[str, float]]:

@@ -63,8 +63,9 @@ def segment_box_blocked(ax, ay, az, bx, by, bz, box) -> bool:
 
 
 @nb.njit(cache=True)
-def select_shots(poses, alive, bullets, targets, static_boxes, robot_boxes, plates, out_plate,
-                 out_dist):
+def select_shots(
+    poses, alive, bullets, targets, static_boxes, robot_boxes, plates, out_plate, out_dist
+):
     """For each robot, the plate of its target it hits this step (-1 for none).
 
     poses (N, 3); alive (N,) bool; bullets (N,) float; targets (N,) int robot index or -1;
@@ -118,8 +119,12 @@ def select_shots(poses, alive, bullets, targets, static_boxes, robot_boxes, plat
                     break
             if not blocked:
                 for r in range(n):
-                    if r != s and r != t and segment_box_blocked(
-                        mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, robot_boxes[r]
+                    if (
+                        r != s
+                        and r != t
+                        and segment_box_blocked(
+                            mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, robot_boxes[r]
+                        )
                     ):
                         blocked = True
                         break
@@ -142,9 +147,26 @@ def fill_robot_boxes(poses, out):
 
 
 @nb.njit(cache=True)
-def fire(poses, alive, bullets, hp, targets, team, scale, static_boxes, robot_boxes, plates,
-         draws, plate_out, dist_out, dealt_total, taken_total, kills, tally_damage,
-         tally_kills) -> int:
+def fire(
+    poses,
+    alive,
+    bullets,
+    hp,
+    targets,
+    team,
+    scale,
+    static_boxes,
+    robot_boxes,
+    plates,
+    draws,
+    plate_out,
+    dist_out,
+    dealt_total,
+    taken_total,
+    kills,
+    tally_damage,
+    tally_kills,
+) -> int:
     """One physics step of shooting: select shots, spend bullets, apply damage, count kills.
 
     Shots are simultaneous: all are chosen from the same poses before any damage lands.
@@ -155,8 +177,9 @@ def fire(poses, alive, bullets, hp, targets, team, scale, static_boxes, robot_bo
     """
     n = poses.shape[0]
     fill_robot_boxes(poses, robot_boxes)
-    select_shots(poses, alive, bullets, targets, static_boxes, robot_boxes, plates, plate_out,
-                 dist_out)
+    select_shots(
+        poses, alive, bullets, targets, static_boxes, robot_boxes, plates, plate_out, dist_out
+    )
     raw = np.zeros(n)
     incoming = np.zeros(n)
     for s in range(n):

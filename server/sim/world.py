@@ -72,8 +72,13 @@ class World:
                 physicsClientId=cid,
             )
             pb.changeDynamics(
-                body, -1, lateralFriction=0.0, restitution=0.0, linearDamping=0.0,
-                angularDamping=0.0, physicsClientId=cid,
+                body,
+                -1,
+                lateralFriction=0.0,
+                restitution=0.0,
+                linearDamping=0.0,
+                angularDamping=0.0,
+                physicsClientId=cid,
             )
             self.bodies.append(body)
         if self.gui:
@@ -85,8 +90,11 @@ class World:
         pb.resetSimulation(physicsClientId=cid)
         pb.setGravity(0, 0, 0, physicsClientId=cid)
         pb.setPhysicsEngineParameter(
-            fixedTimeStep=self.physics_dt, numSubSteps=1, numSolverIterations=10,
-            deterministicOverlappingPairs=1, physicsClientId=cid,
+            fixedTimeStep=self.physics_dt,
+            numSubSteps=1,
+            numSolverIterations=10,
+            deterministicOverlappingPairs=1,
+            physicsClientId=cid,
         )
         self.static_bodies = [self._box(*b) for b in _static_boxes()]
         self._robot_shape = pb.createCollisionShape(
@@ -108,11 +116,15 @@ class World:
 
     def _box(self, cx: float, cy: float, hx: float, hy: float, yaw: float, h: float) -> int:
         cid = self.client
-        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[hx, hy, h / 2],
-                                        physicsClientId=cid)
+        shape = pb.createCollisionShape(
+            pb.GEOM_BOX, halfExtents=[hx, hy, h / 2], physicsClientId=cid
+        )
         body = pb.createMultiBody(
-            baseMass=0, baseCollisionShapeIndex=shape, basePosition=[cx, cy, h / 2],
-            baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]), useMaximalCoordinates=True,
+            baseMass=0,
+            baseCollisionShapeIndex=shape,
+            basePosition=[cx, cy, h / 2],
+            baseOrientation=pb.getQuaternionFromEuler([0, 0, yaw]),
+            useMaximalCoordinates=True,
             physicsClientId=cid,
         )
         pb.changeDynamics(body, -1, lateralFriction=0.0, restitution=0.0, physicsClientId=cid)
@@ -137,14 +149,13 @@ class World:
         ):
             if a:
                 c, s = cos(yaw), sin(yaw)
-                reset_vel(body, (c * vf - s * vl, s * vf + c * vl, 0.0), (0.0, 0.0, w),
-                          physicsClientId=cid)
+                reset_vel(body, (c * vf - s * vl, s * vf + c * vl, 0.0), (0.0, 0.0, w), cid)
             else:
-                reset_vel(body, _ZERO, _ZERO, physicsClientId=cid)
+                reset_vel(body, _ZERO, _ZERO, cid)
         pb.stepSimulation(physicsClientId=cid)
         new = []
         for body, prev, a in zip(self.bodies, old, live, strict=True):
-            pos, q = get_pose(body, physicsClientId=cid)
+            pos, q = get_pose(body, cid)  # positional: keyword parsing costs per call
             if not a:
                 # Hold destroyed robots exactly where they died, even if something pushed them.
                 if pos[0] != prev[0] or pos[1] != prev[1]:

@@ -63,8 +63,15 @@ class Zones:
             effects[za], effects[zb] = pair
         self.state.effects = effects
 
-    def update(self, t_steps: int, poses: np.ndarray, alive: np.ndarray, hp: np.ndarray,
-               max_hp: np.ndarray, bullets: np.ndarray) -> None:
+    def update(
+        self,
+        t_steps: int,
+        poses: np.ndarray,
+        alive: np.ndarray,
+        hp: np.ndarray,
+        max_hp: np.ndarray,
+        bullets: np.ndarray,
+    ) -> None:
         """Refresh on schedule, then trigger zones under live robots; edits hp and bullets."""
         now = t_steps * F.PHYSICS_DT
         if any(abs(now - r) < F.PHYSICS_DT / 2 for r in REFRESH_S):
@@ -80,8 +87,16 @@ class Zones:
                 self._apply(effect, int(robot), now, hp, max_hp, bullets, alive)
                 self.state.log.append((now, name, effect, int(robot)))
 
-    def _apply(self, effect: str, robot: int, now: float, hp: np.ndarray, max_hp: np.ndarray,
-               bullets: np.ndarray, alive: np.ndarray) -> None:
+    def _apply(
+        self,
+        effect: str,
+        robot: int,
+        now: float,
+        hp: np.ndarray,
+        max_hp: np.ndarray,
+        bullets: np.ndarray,
+        alive: np.ndarray,
+    ) -> None:
         team = slice(0, self.n_blue) if effect.endswith("blue") else slice(self.n_blue, self.n)
         if effect.startswith("hp_"):
             live = alive[team]
@@ -103,5 +118,7 @@ class Zones:
 
     def info(self) -> dict[str, object]:
         """Effects still on offer and every trigger so far."""
-        return {"zones": dict(self.state.effects),
-                "zone_log": [list(entry) for entry in self.state.log]}
+        return {
+            "zones": dict(self.state.effects),
+            "zone_log": [list(entry) for entry in self.state.log],
+        }

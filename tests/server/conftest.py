@@ -27,8 +27,13 @@ def still(n: int = 4, target: int = 0) -> list[np.ndarray]:
     return [np.array([0.0, 0.0, 0.0, target]) for _ in range(n)]
 
 
-def duel(arena: Arena, shooter: tuple, victim: tuple, shooter_bullets: float = 370,
-         victim_is_red: bool = True) -> tuple[np.ndarray, dict]:
+def duel(
+    arena: Arena,
+    shooter: tuple,
+    victim: tuple,
+    shooter_bullets: float = 370,
+    victim_is_red: bool = True,
+) -> tuple[np.ndarray, dict]:
     """Put blue_0 at ``shooter`` and red_0 at ``victim``; everyone else far and unarmed.
 
     Returns the HP lost by every robot over one decision (20 physics steps) and info.

@@ -71,8 +71,12 @@ def test_discrete_moves_in_body_frame() -> None:
     a = Arena(seed=1, action_space="discrete", mode="competitive")
     a.reset()
     # blue_0 faces +y: "right" (move 4) goes to +x; it targets red_0 straight ahead.
-    a.place(np.array([(2.5, 1.0, np.pi / 2), (0.6, 3.9, 0.0), (2.5, 3.0, -np.pi / 2),
-                      (7.5, 0.6, np.pi)]), bullets=[0, 0, 0, 0])
+    a.place(
+        np.array(
+            [(2.5, 1.0, np.pi / 2), (0.6, 3.9, 0.0), (2.5, 3.0, -np.pi / 2), (7.5, 0.6, np.pi)]
+        ),
+        bullets=[0, 0, 0, 0],
+    )
     for _ in range(8):
         a.step([4, 0, 0, 0])
     assert a.poses[0, 0] > 2.5 + 0.5
@@ -91,8 +95,10 @@ def test_discrete_released_period_is_five_steps() -> None:
 def test_auto_turn_faces_the_target() -> None:
     a = Arena(seed=1, action_space="discrete", mode="competitive")
     a.reset()
-    a.place(np.array([(3.0, 1.9, 0.0), (0.6, 3.9, 0.0), (3.0, 3.2, 0.0), (7.5, 0.6, np.pi)]),
-            bullets=[0, 0, 0, 0])
+    a.place(
+        np.array([(3.0, 1.9, 0.0), (0.6, 3.9, 0.0), (3.0, 3.2, 0.0), (7.5, 0.6, np.pi)]),
+        bullets=[0, 0, 0, 0],
+    )
     for _ in range(40):  # 4 s of "stop" aimed at red_0 straight above (ω = heading error)
         a.step([0, 0, 0, 0])
     assert a.poses[0, 2] == pytest.approx(np.pi / 2, abs=0.1)
@@ -102,13 +108,17 @@ def test_auto_turn_faces_the_target() -> None:
 def test_abstract_action_drives_to_chosen_candidate_point() -> None:
     a = Arena(seed=1, action_space="abstract", mode="competitive")
     a.reset()
-    a.place(np.array([(1.0, 1.0, 0.0), (0.6, 3.9, 0.0), (5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]),
-            bullets=[0, 0, 0, 0])
+    a.place(
+        np.array([(1.0, 1.0, 0.0), (0.6, 3.9, 0.0), (5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]),
+        bullets=[0, 0, 0, 0],
+    )
     goal = a.cands[0, 0, 2].copy()  # blue_0's third point around red_0
     for _ in range(12):
         a.step([2, 0, 0, 0])
-        a.place(np.concatenate([a.poses[:2], [(5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]]),
-                bullets=[0, 0, 0, 0])  # hold red still so the point stays put
+        a.place(
+            np.concatenate([a.poses[:2], [(5.0, 2.8, np.pi), (7.5, 0.6, np.pi)]]),
+            bullets=[0, 0, 0, 0],
+        )  # hold red still so the point stays put
         if np.hypot(*(a.poses[0, :2] - goal)) < 0.2:
             break
     assert np.hypot(*(a.poses[0, :2] - goal)) < 0.2

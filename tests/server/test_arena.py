@@ -18,8 +18,9 @@ START = np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (7.4, 3.9, np.pi), (7.5, 0.6
 """blue_0 on an open lane along y = 1.9 (B6 is at y 2.15..2.33, B4 starts at x 3.55)."""
 
 
-def drive(contexts: dict, cmd: tuple = (2.0, 0.0, 0.0), decisions: int = 1,
-          then_stop: int = 0) -> np.ndarray:
+def drive(
+    contexts: dict, cmd: tuple = (2.0, 0.0, 0.0), decisions: int = 1, then_stop: int = 0
+) -> np.ndarray:
     """blue_0's x after driving ``cmd`` from rest, optionally then commanding zero."""
     a = Arena(seed=1, action_space="continuous", mode="competitive")
     a.reset(contexts)
@@ -43,8 +44,15 @@ def test_two_metres_per_second_settles_near_spec() -> None:
 
 @pytest.mark.parametrize(
     ("key", "value", "slower"),
-    [("M", 10.0, True), ("Wheel_I", 0.05, True), ("VK1", 1.5, False), ("VK1", 0.1, True),
-     ("KP", 2.0, True), ("vy_dt", 0.2, True), ("vx_dt", 0.2, False)],
+    [
+        ("M", 10.0, True),
+        ("Wheel_I", 0.05, True),
+        ("VK1", 1.5, False),
+        ("VK1", 0.1, True),
+        ("KP", 2.0, True),
+        ("vy_dt", 0.2, True),
+        ("vx_dt", 0.2, False),
+    ],
 )
 def test_dynamics_keys_move_the_step_response(key: str, value: float, slower: bool) -> None:
     base = drive({})[0, 0] - START[0, 0]
@@ -68,8 +76,10 @@ def test_lower_friction_coasts_longer() -> None:
 def test_opponent_dynamics_apply_to_red_only() -> None:
     a = Arena(seed=1, action_space="continuous", mode="competitive")
     a.reset({"opponent.VK1": 0.05, "opponent_speed": 0.5})
-    a.place(np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (1.0, 0.6, 0.0), (7.5, 3.9, np.pi)]),
-            bullets=[0, 0, 0, 0])
+    a.place(
+        np.array([(1.0, 1.9, 0.0), (0.6, 3.9, 0.0), (1.0, 0.6, 0.0), (7.5, 3.9, np.pi)]),
+        bullets=[0, 0, 0, 0],
+    )
     fwd = np.array([2.0, 0.0, 0.0, 0])
     a.step([fwd, still(1)[0], fwd, still(1)[0]])
     assert a.poses[0, 0] - 1.0 > 2 * (a.poses[2, 0] - 1.0)
@@ -80,8 +90,10 @@ def test_robots_cannot_pass_walls_or_obstacles() -> None:
     a = Arena(seed=1, action_space="continuous", mode="competitive")
     a.reset()
     # blue_0 drives at the right wall, blue_1 at B5 from below, red_0 diagonally into a corner.
-    a.place(np.array([(6.8, 1.9, 0.0), (4.04, 2.8, np.pi / 2), (1.0, 1.0, np.pi), (7.5, 3.9, 0)]),
-            bullets=[0, 0, 0, 0])
+    a.place(
+        np.array([(6.8, 1.9, 0.0), (4.04, 2.8, np.pi / 2), (1.0, 1.0, np.pi), (7.5, 3.9, 0)]),
+        bullets=[0, 0, 0, 0],
+    )
     push = np.array([2.0, 0.0, 0.0, 0])
     diag = np.array([1.5, -1.5, 0.0, 0])
     for _ in range(10):
@@ -136,8 +148,13 @@ def test_determinism_within_and_across_processes() -> None:
     assert _trajectory(42) == first
     assert _trajectory(43) != first
     code = "from tests.server.test_arena import _trajectory; print(_trajectory(42))"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=str(__import__("pathlib").Path(__file__).parents[2]))
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=str(__import__("pathlib").Path(__file__).parents[2]),
+    )
     assert out.stdout.strip().splitlines()[-1] == first
 
 
@@ -164,8 +181,14 @@ def test_original_context_dicts_work() -> None:
 
 @pytest.mark.parametrize(
     ("contexts", "needle"),
-    [({"VK2": 1.0}, "VK2"), ({"coef": -1.0}, "coef"), ({"level": 7}, "level"),
-     ({"M": float("nan")}, "M"), ({"KP": "fast"}, "KP"), ({"level": [1]}, "level")],
+    [
+        ({"VK2": 1.0}, "VK2"),
+        ({"coef": -1.0}, "coef"),
+        ({"level": 7}, "level"),
+        ({"M": float("nan")}, "M"),
+        ({"KP": "fast"}, "KP"),
+        ({"level": [1]}, "level"),
+    ],
 )
 def test_bad_contexts_name_the_key(contexts: dict, needle: str) -> None:
     a = Arena(seed=1)

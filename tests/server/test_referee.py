@@ -90,8 +90,10 @@ def test_annihilation_ends_episode_with_kill_rewards() -> None:
 def test_destroyed_robot_stays_as_obstacle() -> None:
     a = Arena(seed=3, action_space="continuous", mode="competitive")
     a.reset({"opponent_hp": 10})
-    a.place(np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.0, 3.8, 0.0)]),
-            bullets=[370, 0, 0, 0])
+    a.place(
+        np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.0, 3.8, 0.0)]),
+        bullets=[370, 0, 0, 0],
+    )
     a.step(still())
     assert not a.referee.alive[2]
     dead_at = a.poses[2].copy()
@@ -106,8 +108,10 @@ def test_destroyed_robot_stays_as_obstacle() -> None:
 def test_time_limit_decides_by_hp() -> None:
     a = Arena(seed=5, action_space="continuous", episode_steps=40, mode="competitive")
     a.reset()
-    a.place(np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.5, 0.6, np.pi)]),
-            bullets=[370, 0, 0, 0])
+    a.place(
+        np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.5, 0.6, np.pi)]),
+        bullets=[370, 0, 0, 0],
+    )
     _, _, done, info = a.step(still())
     assert not done
     _, rewards, done, info = a.step(still())
@@ -119,8 +123,10 @@ def test_time_limit_decides_by_hp() -> None:
 def test_rewards_zero_sum_and_shared_in_competitive_mode() -> None:
     a = Arena(seed=2, action_space="continuous", mode="competitive")
     a.reset()
-    a.place(np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.5, 0.6, np.pi)]),
-            bullets=[370, 0, 0, 0])
+    a.place(
+        np.array([(1.0, Y, 0.0), (0.6, 3.9, 0.0), (3.0, Y, np.pi), (7.5, 0.6, np.pi)]),
+        bullets=[370, 0, 0, 0],
+    )
     _, rewards, _, _ = a.step(still())
     assert rewards[0] == rewards[1] == pytest.approx(0.2)
     assert rewards[2] == rewards[3] == pytest.approx(-0.2)
@@ -132,8 +138,10 @@ def test_sampled_hits_average_to_expected() -> None:
     total = 0.0
     for _ in range(10):
         a.reset()
-        a.place(np.array([(0.35, Y, 0.0), (0.6, 3.9, 0.0), (5.3, Y, np.pi), (7.5, 0.6, np.pi)]),
-                bullets=[370, 0, 0, 0])
+        a.place(
+            np.array([(0.35, Y, 0.0), (0.6, 3.9, 0.0), (5.3, Y, np.pi), (7.5, 0.6, np.pi)]),
+            bullets=[370, 0, 0, 0],
+        )
         hp0 = a.referee.hp[2]
         a.step(still())
         lost = hp0 - a.referee.hp[2]

@@ -16,8 +16,9 @@ def _on_zones(seed: int) -> tuple[Arena, dict]:
     a.reset()
     a.referee.hp[:] = 300.0
     # Everyone faces a wall and has no bullets: only zone effects change HP and ammunition.
-    poses = np.array([(*F.ZONES["F1"], np.pi), (*F.ZONES["F2"], np.pi), (*F.ZONES["F4"], 0.0),
-                      (7.5, 3.9, 0.0)])
+    poses = np.array(
+        [(*F.ZONES["F1"], np.pi), (*F.ZONES["F2"], np.pi), (*F.ZONES["F4"], 0.0), (7.5, 3.9, 0.0)]
+    )
     a.place(poses, bullets=[0, 0, 0, 0])
     _, _, _, info = a.step(still())
     return a, info
