@@ -32,12 +32,19 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from neuronsmae.client.spaces import ArenaSource, Layout, open_arena
+from neuronsmae.client.spaces import ArenaSource, Layout, open_face
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
-from neuronsmae.protocol.interface import ArenaAPI
 
 ENV_ID = "NeuronsMAE/Coop-v0"
 RENDER_MODES = ("rgb_array",)
+
+
+def _coop(layout: Layout) -> None:
+    if layout.mode != "cooperative":
+        raise InvalidOptionError(
+            f"CoopEnv drives one team, so it needs mode='cooperative', got "
+            f"{layout.mode!r}; use the PettingZoo face for both teams"
+        )
 
 
 class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
@@ -65,22 +72,10 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         contexts: Mapping[str, Any] | None = None,
         **rm_kwargs: Any,
     ) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode={render_mode!r} is not one of {RENDER_MODES} or None")
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
-        self.arena: ArenaAPI = open_arena(env, rm_kwargs)
-        try:
-            self.layout = layout = Layout.of(self.arena)
-            if layout.mode != "cooperative":
-                raise InvalidOptionError(
-                    f"CoopEnv drives one team, so it needs mode='cooperative', got "
-                    f"{layout.mode!r}; use the PettingZoo face for both teams"
-                )
-        except BaseException:
-            if not isinstance(env, ArenaAPI):  # built here: nobody else can close it
-                self.arena.close()
-            raise
+        self.arena, self.layout = open_face(env, rm_kwargs, render_mode, RENDER_MODES, _coop)
+        layout = self.layout
         self.n_agents = n = len(layout.agents)
         self.metadata = {**type(self).metadata, "render_fps": layout.render_fps}
         self.observation_space = layout.obs_space(n)

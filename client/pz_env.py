@@ -32,9 +32,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo.utils.env import ParallelEnv
 
-from neuronsmae.client.spaces import ArenaSource, Layout, open_arena
+from neuronsmae.client.spaces import ArenaSource, open_face
 from neuronsmae.protocol.errors import InvalidActionError
-from neuronsmae.protocol.interface import ArenaAPI
 
 AgentID = str
 ObsDict = dict[str, np.ndarray]
@@ -67,17 +66,10 @@ class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
         contexts: Mapping[str, Any] | None = None,
         **rm_kwargs: Any,
     ) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode={render_mode!r} is not one of {RENDER_MODES} or None")
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
-        self.arena: ArenaAPI = open_arena(env, rm_kwargs)
-        try:
-            self.layout = layout = Layout.of(self.arena)
-        except BaseException:
-            if not isinstance(env, ArenaAPI):  # built here: nobody else can close it
-                self.arena.close()
-            raise
+        self.arena, self.layout = open_face(env, rm_kwargs, render_mode, RENDER_MODES)
+        layout = self.layout
         self.metadata = {**type(self).metadata, "render_fps": layout.render_fps}
         self.possible_agents = list(layout.agents)
         self.agents: list[AgentID] = []

@@ -69,6 +69,30 @@ def open_arena(env: ArenaSource, rm_kwargs: Mapping[str, Any]) -> ArenaAPI:
     return arena
 
 
+def open_face(
+    env: ArenaSource,
+    rm_kwargs: Mapping[str, Any],
+    render_mode: str | None,
+    render_modes: tuple[str, ...],
+    check: Callable[[Layout], None] | None = None,
+) -> tuple[ArenaAPI, Layout]:
+    """What both faces do first: check ``render_mode``, open the arena, read its layout and
+    run ``check`` on it. If that fails, an arena built here is closed (nobody else could);
+    one the caller passed in stays theirs."""
+    if render_mode is not None and render_mode not in render_modes:
+        raise ValueError(f"render_mode={render_mode!r} is not one of {render_modes} or None")
+    arena = open_arena(env, rm_kwargs)
+    try:
+        layout = Layout.of(arena)
+        if check is not None:
+            check(layout)
+    except BaseException:
+        if not isinstance(env, ArenaAPI):
+            arena.close()
+        raise
+    return arena, layout
+
+
 @dataclass(frozen=True)
 class Layout:
     """The shape of an arena's task, read once from ``get_env_info`` (fixed by its options)."""
