@@ -21,11 +21,6 @@ most N per node.
 from __future__ import annotations
 
 import contextlib
-import os
-import subprocess
-import sys
-import tempfile
-import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -33,6 +28,7 @@ import ray
 from ray.exceptions import GetTimeoutError, RayError
 
 from neuronsmae.client import ping
+from neuronsmae.client.launcher import ServerProcess
 from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.trainers.config import TrainConfig, parse_resources
 
@@ -54,43 +50,27 @@ class ServerActor:
         self.host = host or ray.util.get_node_ip_address()
         self.port, self.seed, self.time_scale = port, seed, time_scale
         self.starts = 0
-        self.proc: subprocess.Popen[bytes] | None = None
-        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in close)
-            prefix=f"neuronsmae-server-{port}-", suffix=".log", delete=False
-        )
+        self.server: ServerProcess | None = None
         self._start()
 
     def _start(self) -> None:
-        cmd = [
-            sys.executable, "-m", "neuronsmae.server", "--port", str(self.port),
-            "--seed", str(self.seed), "--host", self.host,
-            "--time-scale", str(self.time_scale), "--watch-parent", str(os.getpid()),
-        ]  # fmt: skip
-        self.proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=self._log,
-            stderr=self._log,
-            start_new_session=True,
-        )
+        """Launch (or relaunch) the server the same way ``RM`` launches a local one."""
+        if self.server is not None:
+            self.server.stop()
+        self.server = ServerProcess(self.port, self.seed, self.host, self.time_scale, True)
         self.starts += 1
-        deadline = time.monotonic() + SERVER_STARTUP_S
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise ServerUnavailableError(
-                    f"server on {self.host}:{self.port} exited with status "
-                    f"{self.proc.returncode} (log: {self._log.name})"
-                )
-            try:
-                ping(self.port, self.host, timeout=1.0)
-                return
-            except ServerUnavailableError:
-                time.sleep(0.2)
-        raise ServerUnavailableError(f"server on {self.host}:{self.port} did not answer")
+        self.server.wait_ready(self._answers, SERVER_STARTUP_S)
+
+    def _answers(self) -> bool:
+        try:
+            ping(self.port, self.host, timeout=1.0)
+        except ServerUnavailableError:
+            return False
+        return True
 
     def address(self) -> tuple[str, int]:
         """Host and port of a live server (started again first if it has died)."""
-        if self.proc is None or self.proc.poll() is not None:
+        if self.server is None or self.server.proc.poll() is not None:
             self._start()
         return self.host, self.port
 
@@ -100,17 +80,8 @@ class ServerActor:
 
     def close(self) -> None:
         """Stop the server; safe to call twice."""
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if not self._log.closed:
-            self._log.close()
-            with contextlib.suppress(OSError):
-                os.unlink(self._log.name)
+        if self.server is not None:
+            self.server.stop()
 
 
 class ServerPool:
