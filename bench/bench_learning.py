@@ -48,11 +48,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def print_table(evals: list[dict[str, Any]]) -> None:
     """The learning curve: one row per greedy evaluation."""
-    print(f"{'episodes':>9} {'env steps':>10} {'wall s':>8} {'win':>6} {'draw':>6} {'return':>8}")
+    print(
+        f"{'episodes':>9} {'env steps':>10} {'wall s':>8} {'win':>6} {'draw':>6} "
+        f"{'return':>8}  eval"
+    )
     for row in evals:
         print(
             f"{row['episodes']:>9} {row['env_steps']:>10} {row['wall_seconds']:>8.0f} "
-            f"{row['win_rate']:>6.2f} {row['draw_rate']:>6.2f} {row['mean_return']:>8.2f}"
+            f"{row['win_rate']:>6.2f} {row['draw_rate']:>6.2f} {row['mean_return']:>8.2f}  "
+            f"{row.get('split', 'validation')}/{row.get('weights', 'latest')}"
         )
 
 
@@ -80,13 +84,19 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     result = train(cfg)
     total = time.perf_counter() - start
-    final = result["final"]
+    final, best = result["final"], result.get("best")
     print_table(result["evals"])
     print(
         f"final greedy win rate {final['win_rate']:.3f} over {final['eval_episodes']} "
         f"held-out episodes; {result['counters']['episodes']} training episodes, "
         f"{result['counters']['env_steps']} env steps, {total:.0f} s in all"
     )
+    if best is not None:
+        print(
+            f"best validated weights (chosen at {best['chosen_at_episodes']} episodes): "
+            f"greedy win rate {best['win_rate']:.3f} on the same {best['eval_episodes']} "
+            "test episodes"
+        )
     report = {
         "alg": args.alg,
         "level": args.level,
@@ -95,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed,
         "config": cfg.to_dict(),
         "final": final,
+        "best": best,
         "curve": result["evals"],
         "counters": result["counters"],
         "total_seconds": total,

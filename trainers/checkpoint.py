@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuronsmae.trainers.learner import AgentSpec, EnvSpec, QLearner
+from neuronsmae.trainers.learner import AgentSpec, EnvSpec
 
 CHECKPOINT_NAME = "checkpoint.pt"
 """File name of a run's latest checkpoint inside its run directory."""
@@ -54,18 +54,24 @@ def save_checkpoint(
     config: dict[str, Any],
     env: EnvSpec,
     spec: AgentSpec,
-    learner: QLearner,
+    learner_state: dict[str, Any],
     counters: Counters,
     np_rng: np.random.Generator,
+    selection: dict[str, Any] | None = None,
 ) -> None:
-    """Write the checkpoint atomically (temporary file, then rename)."""
+    """Write the checkpoint atomically (temporary file, then rename).
+
+    ``learner_state`` is ``QLearner.state_dict()``: its ``agent`` entry is what acting needs.
+    ``selection`` is the evaluation that chose these weights (for ``best.pt``).
+    """
     payload = {
         "format": FORMAT,
         "config": config,
         "env": asdict(env),
         "agent_spec": asdict(spec),
-        "learner": learner.state_dict(),
+        "learner": learner_state,
         "counters": asdict(counters),
+        "selection": selection,
         "rng": {
             "torch": torch.get_rng_state(),
             "numpy": np_rng.bit_generator.state,

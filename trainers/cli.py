@@ -121,6 +121,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{counters['env_steps']} env steps, {counters['wall_seconds']:.0f} s; "
         f"checkpoint {Path(result['run_dir']) / 'checkpoint.pt'}"
     )
+    best = result.get("best")
+    if best is not None:
+        print(
+            f"best validated weights (chosen at {best['chosen_at_episodes']} episodes, "
+            f"validation win rate {best['validation']['win_rate']:.2f}): greedy win rate "
+            f"{best['win_rate']:.2f} on the same test episodes; "
+            f"{Path(result['run_dir']) / 'best.pt'}"
+        )
     return 0
 
 

@@ -161,7 +161,14 @@ class TrainConfig:
     final_eval_episodes: int = 100
     """Greedy episodes of the final evaluation at the end of the run."""
     eval_seed: int = 1_000_000_000
-    """First held-out seed; training episodes use seeds below it."""
+    """First held-out seed; training episodes use seeds below it. Periodic evaluations
+    (validation) use ``eval_seed + k``; the final evaluation (test) uses
+    ``eval_seed + TEST_SEED_OFFSET + k``, so the figures reported at the end never come from
+    the seeds that chose the best weights."""
+    keep_best: bool = True
+    """Keep the weights of the best periodic evaluation, write them to ``best.pt`` and
+    evaluate them on the test seeds at the end beside the final weights (model selection
+    on validation seeds, as is usual when reporting greedy win rates)."""
     checkpoint_every: int = 1000
     """Training episodes between checkpoints (one is always written at the end)."""
     torch_threads: int = 1

@@ -39,8 +39,11 @@ EVAL_COLUMNS = (
     "loss_rate",
     "mean_return",
     "eval_episodes",
+    "split",
+    "weights",
 )
-"""Columns of ``eval.csv`` (greedy play on held-out seeds)."""
+"""Columns of ``eval.csv`` (greedy play on held-out seeds): ``split`` is ``validation``
+(periodic) or ``test`` (final); ``weights`` is ``latest`` or ``best`` (see ``keep_best``)."""
 
 
 class _Csv:
@@ -100,11 +103,13 @@ class Recorder:
     def eval(self, row: dict[str, Any]) -> None:
         """Record a greedy evaluation."""
         self.eval_csv.write(row)
+        split, weights = row.get("split", "validation"), row.get("weights", "latest")
+        tag = "eval" if split == "validation" else f"{split}_{weights}"
         for key in ("win_rate", "draw_rate", "mean_return"):
-            self.tb.add_scalar(f"eval/{key}", row[key], row["env_steps"])
+            self.tb.add_scalar(f"{tag}/{key}", row[key], row["env_steps"])
         self.last_eval = row["win_rate"]
         self.bar.write(
-            f"eval @ {row['episodes']} episodes, {row['env_steps']} steps, "
+            f"{tag} @ {row['episodes']} episodes, {row['env_steps']} steps, "
             f"{row['wall_seconds']:.0f} s: greedy win rate {row['win_rate']:.2f} "
             f"(return {row['mean_return']:.1f})"
         )

@@ -10,8 +10,10 @@ Two loops share everything but the order of sampling and learning:
   episode, waits for all, then learns.
 
 Training episode ``k`` is reset with a seed derived from the run seed and ``k`` that is
-always below ``eval_seed``; evaluation uses ``eval_seed, eval_seed+1, ...``, so the greedy
-win rate is measured on starts the agents never trained on.
+always below ``eval_seed``. Periodic greedy evaluations (the validation split) use
+``eval_seed, eval_seed+1, ...`` and the final one (the test split) starts at
+``eval_seed + TEST_SEED_OFFSET``: the win rate is measured on starts the agents never trained
+on, and the reported one on starts that did not pick the best weights either.
 """
 
 from __future__ import annotations
@@ -48,6 +50,11 @@ from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy
 from neuronsmae.trainers.sampler import Request, Sampler
 
+TEST_SEED_OFFSET = 10_000_000
+"""Test seeds start this far above ``eval_seed``, clear of any validation seed."""
+BEST_NAME = "best.pt"
+"""File name of the best-validated weights inside the run directory (checkpoint format)."""
+
 log = logging.getLogger(__name__)
 
 Hook = Callable[["Trainer"], None]
@@ -70,6 +77,8 @@ class Trainer:
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.torch_threads)
+        self.best: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
+        """Acting weights of the best validation evaluation, and that evaluation's row."""
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             ray.init(
@@ -144,6 +153,11 @@ class Trainer:
         self.learner.load_state_dict(payload["learner"])
         self.counters = Counters(**payload["counters"])
         restore_rng(payload["rng"], self.np_rng)
+        best = self.run_dir / BEST_NAME
+        if self.cfg.keep_best and best.is_file():
+            chosen = load_checkpoint(best)
+            weights = {k: v.numpy() for k, v in chosen["learner"]["agent"].items()}
+            self.best = (weights, chosen["selection"])
         log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
 
     def close(self) -> None:
@@ -167,13 +181,15 @@ class Trainer:
                 self._run_sync()
             else:
                 self._run_async()
-            final = self.evaluate(self.cfg.final_eval_episodes)
+            final = self.evaluate(self.cfg.final_eval_episodes, split="test")
             self.checkpoint()
+            best = self._evaluate_best()
         finally:
             self.recorder.close()
             self.close()
         return {
             "final": final,
+            "best": best,
             "evals": self.evals,
             "counters": asdict(self.counters),
             "run_dir": str(self.run_dir),
@@ -264,17 +280,55 @@ class Trainer:
             **self.last_stats,
         }
 
-    def evaluate(self, episodes: int | None = None) -> dict[str, Any]:
-        """Greedy win rate on the held-out seeds; recorded and returned."""
+    def evaluate(
+        self, episodes: int | None = None, split: str = "validation", weights: str = "latest"
+    ) -> dict[str, Any]:
+        """Greedy win rate of the broadcast weights on held-out seeds; recorded and returned.
+
+        ``split`` picks the seeds (``validation`` or ``test``, see the module docstring);
+        with ``keep_best``, a validation result better than every earlier one keeps the
+        weights that earned it.
+        """
         cfg, c = self.cfg, self.counters
         n = episodes or cfg.eval_episodes
-        requests = [Request(cfg.eval_seed + k, 0.0, "eval") for k in range(n)]
+        first = cfg.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
+        requests = [Request(first + k, 0.0, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
-        row = {**asdict(c), **figures}
+        row = {**asdict(c), **figures, "split": split, "weights": weights}
         self.recorder.eval(row)
         self.evals.append(row)
+        better = self.best is None or row["win_rate"] > self.best[1]["win_rate"]
+        if split == "validation" and cfg.keep_best and better:
+            self.best = (self.learner.acting_weights(), row)
+            self._save_best()
         return row
+
+    def _save_best(self) -> None:
+        """Write the best weights as a checkpoint-format file that the match command loads
+        (the learner's other state is the current one: resume from checkpoint.pt)."""
+        assert self.best is not None
+        state = self.learner.state_dict()
+        state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
+        save_checkpoint(
+            self.run_dir / BEST_NAME,
+            config=self.cfg.to_dict(),
+            env=self.env,
+            spec=self.spec,
+            learner_state=state,
+            counters=self.counters,
+            np_rng=self.np_rng,
+            selection=self.best[1],
+        )
+
+    def _evaluate_best(self) -> dict[str, Any] | None:
+        """The best-validated weights on the test seeds (None without ``keep_best``)."""
+        if self.best is None:
+            return None
+        weights, chosen = self.best
+        self.sampler.broadcast(Policy(self.spec, weights))
+        row = self.evaluate(self.cfg.final_eval_episodes, split="test", weights="best")
+        return {**row, "chosen_at_episodes": chosen["episodes"], "validation": chosen}
 
     def checkpoint(self) -> None:
         """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``."""
@@ -283,7 +337,7 @@ class Trainer:
             config=self.cfg.to_dict(),
             env=self.env,
             spec=self.spec,
-            learner=self.learner,
+            learner_state=self.learner.state_dict(),
             counters=self.counters,
             np_rng=self.np_rng,
         )

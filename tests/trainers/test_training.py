@@ -17,10 +17,12 @@ import pytest
 import ray
 import torch
 
+from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint
-from neuronsmae.trainers.train import Trainer, train_seed
+from neuronsmae.trainers.sampler import Request
+from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
@@ -79,6 +81,13 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     steps = _episodes_column(out / "train.csv")
     assert steps == sorted(steps) and steps[-1] == 12
     assert _episodes_column(out / "eval.csv")[-1] == 12
+    with (out / "eval.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert {r["split"] for r in rows} == {"validation", "test"}
+    assert [r["weights"] for r in rows if r["split"] == "test"][-2:] == ["latest", "best"]
+    best = torch.load(out / "best.pt", weights_only=True)  # the match command loads it too
+    assert best["agent_spec"] == second["agent_spec"]
+    assert play(str(out / "best.pt"), "easy", 1, 1_000_000_000)["episodes"] == 1
 
     result = evaluate_checkpoint(out, "easy", episodes=2, seed=7)
     assert 0.0 <= result["win_rate"] <= 1.0 and result["eval_episodes"] == 2
@@ -107,6 +116,34 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
     assert trainer.learner.updates == 2 * cfg.updates_per_round
+
+
+def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
+    tmp_path: Path,
+) -> None:
+    cfg = make_config(
+        {"alg": "vdn", "workers": 1, "episodes": 6, "out": str(tmp_path), "progress": False},
+        dict(kv.split("=") for kv in TINY),
+        {"eval_every": 2, "eval_episodes": 3, "final_eval_episodes": 4},
+    )
+    trainer = Trainer(cfg)
+    played: dict[str, set[int]] = {"validation": set(), "test": set()}
+    run = trainer.sampler.run
+
+    def recording_run(requests: list[Request]) -> list[Episode]:
+        split = "test" if requests[0].seed >= cfg.eval_seed + TEST_SEED_OFFSET else "validation"
+        played[split].update(r.seed for r in requests)
+        return run(requests)
+
+    trainer.sampler.run = recording_run  # type: ignore[method-assign]
+    result = trainer.run()
+    assert played["validation"] == {cfg.eval_seed + k for k in range(3)}
+    assert played["test"] == {cfg.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
+    best, validation = result["best"], [e for e in result["evals"] if e["split"] == "validation"]
+    assert best["split"] == "test" and best["weights"] == "best"
+    assert best["validation"]["win_rate"] == max(e["win_rate"] for e in validation)
+    assert best["validation"]["episodes"] == best["chosen_at_episodes"]
+    assert (tmp_path / "best.pt").is_file()
 
 
 def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: Path) -> None:
