@@ -7,9 +7,15 @@ planner and chassis then drive it exactly as they drive a learning agent. Levels
 * random — a random live target and point, re-drawn each decision (the released level 0);
 * easy   — attack the nearest enemy from the candidate point nearest to itself;
 * middle — attack the enemy with the least HP from the candidate point nearest to itself;
-* hard   — both robots besiege the least-HP enemy from distinct points chosen for the
-  damage they allow (behind and beside the target, where plates take 2–3×), and a robot
-  low on HP falls back to the safest point while its team-mate keeps the siege.
+* hard   — both robots besiege the least-HP enemy (the same target and tie-break as middle):
+  the robot the target is facing holds its front from the nearest candidate point, and the
+  other takes the candidate point most behind the target, where the side and rear plates
+  take 2× and 3× damage.
+
+Nearly every shot lands within 3 m and bullets run out before the time limit, so what a
+bullet is worth depends on the plate it hits; the hard bot's edge is its flanker's plates.
+Middle keeps the paper's rule: the team focuses the least-HP enemy, ties (equal HP, as at
+the start) going to the enemy nearest the whole team, so both robots pick the same one.
 """
 
 from __future__ import annotations
@@ -18,13 +24,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-
-from neuronsmae.server.sim.field import obstacle_array
-from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, segment_blocked
-
-TALL = obstacle_array(tall_only=True)
-LOW_HP_FRACTION = 0.25
-"""The hard bot's retreat threshold, as a fraction of starting HP."""
 
 
 @dataclass
@@ -114,92 +113,56 @@ class MiddleBot:
 
 
 class HardBot:
-    """Besiege the weakest enemy from distinct, high-damage points; retreat when weak.
+    """Both robots besiege the least-HP enemy: one holds its front, the other takes its rear.
 
-    The target is the enemy the team can destroy soonest: its HP over the damage rate the
-    bot's robots would deal it from where they stand (distance band, line of sight, and the
-    plate each one faces), with hysteresis so the siege does not flip between enemies.
-    States per robot: ``siege`` (default) and ``retreat`` (HP below 25 %: go to the
-    candidate point farthest from every other enemy, still shooting at the target).
+    A robot's chassis turns toward its own target, so the besieged enemy shows its front plate
+    (×1) to the robot it is facing and its side (×2) or rear (×3) plates to anyone behind it;
+    the shooter hits the nearest plate it can see. Most shots land within 3 m, so the plate,
+    not the range, decides how much each bullet is worth, and bullets run out before the time
+    limit. Roles per decision: the *holder* is the robot the target faces (the smaller angle
+    off its heading) and keeps it facing that way from the nearest candidate point; the
+    *flanker* takes the point most behind the target, a little discounted by travel, and
+    never the holder's point.
     """
 
-    SWITCH = 0.7
-    """A new target must be this much quicker to destroy than the current one."""
+    TRAVEL = 0.1
+    """Score lost per metre to a point; small, so the flanker will walk round the target."""
+    CLAIMED = 0.8
+    """Points closer than this (m) to the holder's point are left to the holder."""
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
-        self.target: int | None = None
-
-    def _time_to_kill(self, view: BotView, j: int) -> float:
-        enemy = view.poses[view.enemies[j]]
-        rate = 0.0
-        for r in view.robots[view.alive[view.robots]]:
-            me = view.poses[r, :2]
-            d = float(np.hypot(*(me - enemy[:2])))
-            if d >= 9.0 or segment_blocked(me, enemy[:2], TALL, SIGHT_MIN_HEIGHT):
-                continue
-            rel = abs(np.angle(np.exp(1j * (np.arctan2(*(me - enemy[:2])[::-1]) - enemy[2]))))
-            plate = 1.0 if rel < np.pi / 4 else (3.0 if rel > 3 * np.pi / 4 else 2.0)
-            rate += (1.0 if d < 3.0 else 0.5 if d < 6.0 else 0.2) * plate
-        return float(view.hp[view.enemies[j]]) / max(rate, 0.1)
-
-    def _pick(self, view: BotView, live: np.ndarray) -> int:
-        ttk = {int(j): self._time_to_kill(view, int(j)) for j in live}
-        best = min(ttk, key=ttk.__getitem__)
-        if self.target in ttk and ttk[best] > self.SWITCH * ttk[self.target]:
-            best = self.target
-        self.target = best
-        return best
 
     def act(self, view: BotView) -> list[Choice]:
-        live = _live(view)
-        e = self._pick(view, live)
+        e = _least_hp(view, _live(view))
         target = view.poses[view.enemies[e]]
-        taken: list[np.ndarray] = []
-        out: list[Choice] = []
-        for i, r in enumerate(view.robots):
-            pts = view.cands[i, e]
-            me = view.poses[r, :2]
-            exposure = self._exposure(view, pts, live, e)
-            if view.hp[r] < LOW_HP_FRACTION * view.max_hp[r]:
-                score = self._safety(view, pts, live, e) - 2.0 * exposure
-            else:
-                score = self._siege_score(pts, target, me) - 1.5 * exposure
-            for p in taken:  # distinct points: spread the siege around the target
-                score = score - 5.0 * (np.hypot(*(pts - p).T) < 0.8)
-            c = int(np.argmax(score))
-            taken.append(pts[c])
-            out.append((e, c))
+        out = [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
+        alive = [i for i, r in enumerate(view.robots) if view.alive[r]]
+        if len(alive) == 1:
+            out[alive[0]] = (e, self._flank_point(view, alive[0], e, target, None))
+        elif len(alive) == 2:
+            holder, flanker = sorted(alive, key=lambda i: _off_heading(view, i, target))
+            held = view.cands[holder, e, out[holder][1]]
+            out[flanker] = (e, self._flank_point(view, flanker, e, target, held))
         return out
 
-    @staticmethod
-    def _siege_score(pts: np.ndarray, target: np.ndarray, me: np.ndarray) -> np.ndarray:
-        # Points behind the target's heading see its rear (×3) or side (×2) plates.
+    def _flank_point(
+        self, view: BotView, i: int, e: int, target: np.ndarray, held: np.ndarray | None
+    ) -> int:
+        """The candidate point most behind the target's heading, less travel; not ``held``."""
+        pts = view.cands[i, e]
         rel = np.arctan2(pts[:, 1] - target[1], pts[:, 0] - target[0]) - target[2]
-        behind = -np.cos(rel)
-        travel = np.hypot(*(pts - me).T)
-        return 1.0 * behind - 0.6 * travel
+        travel = np.hypot(*(pts - view.poses[view.robots[i], :2]).T)
+        score = -np.cos(rel) - self.TRAVEL * travel
+        if held is not None:
+            score = score - 10.0 * (np.hypot(*(pts - held).T) < self.CLAIMED)
+        return int(np.argmax(score))
 
-    @staticmethod
-    def _exposure(view: BotView, pts: np.ndarray, live: np.ndarray, e: int) -> np.ndarray:
-        """Expected hit factor the *other* live enemies would have on each point."""
-        out = np.zeros(len(pts))
-        for j in live:
-            if j == e:
-                continue
-            other = view.poses[view.enemies[j], :2]
-            for c, p in enumerate(pts):
-                d = float(np.hypot(*(p - other)))
-                if d < 9.0 and not segment_blocked(p, other, TALL, SIGHT_MIN_HEIGHT):
-                    out[c] += 1.0 if d < 3.0 else (0.5 if d < 6.0 else 0.2)
-        return out
 
-    @staticmethod
-    def _safety(view: BotView, pts: np.ndarray, live: np.ndarray, e: int) -> np.ndarray:
-        others = [view.poses[view.enemies[j], :2] for j in live if j != e]
-        if not others:
-            return -np.hypot(*(pts - view.poses[view.enemies[e], :2]).T)
-        return np.min([np.hypot(*(pts - o).T) for o in others], axis=0)
+def _off_heading(view: BotView, i: int, target: np.ndarray) -> float:
+    """How far (rad) bot robot ``i`` is off the target's heading, as seen from the target."""
+    d = view.poses[view.robots[i], :2] - target[:2]
+    return abs(float(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - target[2])))))
 
 
 BOTS: dict[str, Callable[[np.random.Generator], RandomBot | EasyBot | MiddleBot | HardBot]] = {
