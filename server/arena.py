@@ -23,20 +23,15 @@ from neuronsmae.server.sim import field as F
 from neuronsmae.server.sim.chassis import Chassis, ChassisParams
 from neuronsmae.server.sim.referee import BLUE, RED, Referee, StepTally
 from neuronsmae.server.sim.spawn import corner_poses, random_poses
+from neuronsmae.server.sim.stepper import Stepper
 from neuronsmae.server.sim.world import World
 from neuronsmae.server.sim.zones import Zones
 from neuronsmae.server.task import observations as O
 from neuronsmae.server.task import perception as P
-from neuronsmae.server.task.actions import (
-    KIND_CMD,
-    KIND_GOAL,
-    ActionDecoder,
-    Intent,
-    heading_rate,
-    n_actions,
-)
+from neuronsmae.server.task.actions import KIND_GOAL, ActionDecoder, Intent, n_actions
 from neuronsmae.server.task.bots import BotView, make_bot
-from neuronsmae.server.task.planner import Planner, follow
+from neuronsmae.server.task.control import Orders
+from neuronsmae.server.task.planner import Planner
 
 CONTROL_EVERY = 5
 """Physics steps between controller updates (0.1 s): the planner's velocity command and the
@@ -64,9 +59,21 @@ class Arena(ArenaAPI):
         self.mates_of = [self._mates(i) for i in range(self.n)]
         self.enemies_of = [np.flatnonzero(self.team != self.team[i]) for i in range(self.n)]
         self.agents = self._controlled(cfg.mode)
+        # Per-robot index tables used every decision, built once.
+        self.team_robots = {t: np.flatnonzero(self.team == t) for t in (BLUE, RED)}
+        self._order = [
+            np.concatenate([self.mates_of[i], self.enemies_of[i]]) for i in range(self.n)
+        ]
+        self._others = [self._order[i][1:] for i in range(self.n)]
+        self._enemy_table = P.enemy_table(self.enemies_of)
+        self._agent_order = np.array([self._order[i] for i in self.agents]).reshape(
+            len(self.agents), self.n
+        )
+        self._wanted_mask = np.zeros(self.n, dtype=bool)
         self.world = World(self.n, gui=cfg.gui, n_blue=cfg.n_blue)
         self.chassis = Chassis(self.n)
         self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
+        self.stepper = Stepper(self.world, self.chassis, self.referee)
         self.planner = Planner(resolution=cfg.planner_resolution)
         self.zones = Zones(self.rng, cfg.n_blue, self.n) if cfg.zones else None
         self.decoder = ActionDecoder(cfg.action_space, cfg.n_red, cfg.k, cfg.clip_actions)
@@ -122,6 +129,7 @@ class Arena(ArenaAPI):
             if cfg.mode == "cooperative" or cfg.mode == "bots"
             else None,
         }
+        self._wanted_mask = self._wanted()
         self.t = 0
         self.done = False
         self._episodes += 1
@@ -139,11 +147,11 @@ class Arena(ArenaAPI):
             )
         checked = self.decoder.validate(actions, len(self.agents))
         intents = self._intents(checked)
-        paths = self._plan(intents)
+        orders = Orders(intents, self._plan(intents))
         tally = StepTally.zero()
         for k in range(self.config.period):
-            if k % CONTROL_EVERY == 0:
-                self._control(intents, paths)
+            if k % CONTROL_EVERY == 0:  # velocity commands, held until the next update
+                orders.apply(self.poses, self.referee.alive, self.cmd)
             self._physics_step(tally)
             if self.done:
                 break
@@ -257,7 +265,7 @@ class Arena(ArenaAPI):
         """Candidate points, sight and observations for the decision about to be taken."""
         cfg, ref = self.config, self.referee
         self.cands, self.valid = P.all_candidates(
-            self.poses, ref.alive, self.enemies_of, cfg.k, self._wanted()
+            self.poses, ref.alive, self.enemies_of, cfg.k, self._wanted_mask, self._enemy_table
         )
         seen = P.sight(
             self.poses,
@@ -267,31 +275,29 @@ class Arena(ArenaAPI):
             np.deg2rad(cfg.camera_hfov_deg),
             cfg.observability == "partial",
         )
-        poses_n = O.norm_pose(self.poses)
-        hp_n = O.norm_hp(ref.hp, ref.max_hp)
-        bul_n = O.norm_bullets(ref.bullets)
-        t_n = O.norm_time(self.t, cfg.episode_steps)
+        agents, vec = self.agents, None
+        if len(agents) == 0:  # "bots" mode: nobody observes
+            self._obs = []
+            return
+        if cfg.vector_obs:  # agents share one layout (competitive needs equal teams)
+            vec = O.vector_obs_batch(
+                self._agent_order,
+                len(self.mates_of[agents[0]]),
+                O.norm_pose(self.poses),
+                O.norm_xy(self.cands[agents]) if cfg.with_candidates else None,
+                O.norm_time(self.t, cfg.episode_steps),
+                O.norm_hp(ref.hp, ref.max_hp),
+                O.norm_bullets(ref.bullets),
+                seen[agents],
+                cfg.unseen_value,
+            )
+        if not cfg.lidar:
+            self._obs = list(vec.astype(np.float32))  # type: ignore[union-attr]
+            return
         obs = []
-        for i in self.agents:
-            parts = []
-            if cfg.vector_obs:
-                order = np.concatenate([self.mates_of[i], self.enemies_of[i]])
-                cands_n = O.norm_xy(self.cands[i]) if cfg.with_candidates else None
-                parts.append(
-                    O.vector_obs(
-                        order,
-                        len(self.mates_of[i]),
-                        poses_n,
-                        cands_n,
-                        t_n,
-                        hp_n,
-                        bul_n,
-                        seen[i],
-                        cfg.unseen_value,
-                    )
-                )
-            if cfg.lidar:
-                parts.append(P.lidar(self.poses, i, cfg.lidar_range))
+        for a, i in enumerate(self.agents):
+            scan = P.lidar(self.poses, i, cfg.lidar_range)
+            parts = [scan] if vec is None else [vec[a], scan]
             obs.append(np.concatenate(parts).astype(np.float32))
         self._obs = obs
 
@@ -303,7 +309,7 @@ class Arena(ArenaAPI):
         for team, bot in self.bots.items():
             if bot is None:
                 continue
-            robots = np.flatnonzero(self.team == team)
+            robots = self.team_robots[team]
             if not self.referee.alive[robots].any():
                 continue
             view = BotView(
@@ -332,29 +338,11 @@ class Arena(ArenaAPI):
         paths: list[np.ndarray | None] = []
         for i, intent in enumerate(intents):
             if intent.kind == KIND_GOAL and self.referee.alive[i]:
-                others = xy[self.mates_of[i][1:].tolist() + self.enemies_of[i].tolist()]
+                others = xy[self._others[i]]  # team-mates, then enemies
                 paths.append(self.planner.plan(xy[i], intent.goal, others))
             else:
                 paths.append(None)
         return paths
-
-    def _control(self, intents: list[Intent], paths: list[np.ndarray | None]) -> None:
-        """Velocity commands (body frame) from the intents, held until the next update."""
-        alive = self.referee.alive
-        for i, intent in enumerate(intents):
-            if not alive[i]:
-                self.cmd[i] = 0.0
-                continue
-            x, y, yaw = self.poses[i]
-            if intent.kind == KIND_CMD:
-                self.cmd[i] = intent.vel
-                continue
-            if intent.kind == KIND_GOAL:
-                vf, vl = follow((x, y, yaw), paths[i], intent.goal)
-            else:
-                vf, vl = intent.vel[0], intent.vel[1]
-            tx, ty = self.poses[intent.target, :2]
-            self.cmd[i] = (vf, vl, heading_rate(yaw, x, y, tx, ty))
 
     def _physics_step(self, tally: StepTally) -> None:
         ref = self.referee
@@ -363,9 +351,7 @@ class Arena(ArenaAPI):
             self.zones.update(self.t, self.poses, ref.alive, ref.hp, ref.max_hp, ref.bullets)
             cmd = np.where(self.zones.frozen(self.t)[:, None], 0.0, cmd)
             targets = np.where(self.zones.silenced(self.t), -1, targets)
-        vel = self.chassis.step(cmd)
-        self.world.step(self.poses, vel, ref.alive)
-        if ref.physics_step(self.poses, targets, tally):  # someone was destroyed
+        if self.stepper.step(self.poses, cmd, targets, tally):  # someone was destroyed
             for i in np.flatnonzero(~ref.alive):
                 self.chassis.stop(int(i))  # idempotent for robots destroyed earlier
                 self.cmd[i] = 0.0

@@ -181,8 +181,8 @@ def _wheel(
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _step_kernel(
-    cmd: np.ndarray, state: np.ndarray, out: np.ndarray, head: int, n_sub: int, sub_dt: float
+def step_kernel(
+    cmd: np.ndarray, state: np.ndarray, head: int, n_sub: int, sub_dt: float, out: np.ndarray
 ) -> None:
     """Advance every robot's wheels by one physics step; write the mean body velocity to out.
 
@@ -322,10 +322,15 @@ class Chassis:
         cmd = np.ascontiguousarray(cmd, dtype=np.float64)  # one numba specialisation only
         if cmd.shape != (self.n_robots, 3):
             raise ValueError(f"cmd must have shape ({self.n_robots}, 3), got {cmd.shape}")
-        self._head = (self._head + 1) % self._len
         out = np.empty((self.n_robots, 3))
-        _step_kernel(cmd, self._state, out, self._head, self._n_sub, self.sub_dt)
+        step_kernel(cmd, *self.tick(), out)
         return out
+
+    def tick(self) -> tuple[np.ndarray, int, int, float]:
+        """Advance the delay lines' head; return ``(state, head, n_sub, sub_dt)`` for one
+        :func:`step_kernel` call. For fused per-step kernels that call it from numba."""
+        self._head = (self._head + 1) % self._len
+        return self._state, self._head, self._n_sub, self.sub_dt
 
     def stop(self, idx: int) -> None:
         """Freeze a destroyed robot: zero its wheels and ignore its command until ``reset``."""

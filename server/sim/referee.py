@@ -13,7 +13,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from neuronsmae.server.sim import field as F
-from neuronsmae.server.sim.shots import fire
+from neuronsmae.server.sim.shots import (
+    FL_BULLETS,
+    FL_DEALT,
+    FL_HP,
+    FL_SCALE,
+    FL_TAKEN,
+    IT_KILLS,
+    IT_PLATE,
+    IT_TEAM,
+    fire,
+    with_trig,
+)
 
 R_DAMAGE = 0.01
 R_KILL = 3.0
@@ -48,56 +59,56 @@ class Referee:
         self.rng = rng
         self.sampled = sampled
         self.static_boxes = F.obstacle_array(tall_only=True)
-        self._robot_boxes = np.zeros((self.n, 6))
-        self._dist = np.zeros(self.n)
+        self.n_static = len(self.static_boxes)
+        # Tall obstacles, then one scratch row per robot: the ray tests' blockers.
+        self.boxes = with_trig(np.concatenate([self.static_boxes, np.zeros((self.n, 6))]))
         self.reset(np.full(self.n, float(F.START_HP)), coef=1.0)
 
     def reset(self, max_hp: np.ndarray, coef: float) -> None:
-        """Full HP and bullets; ``coef`` scales the damage red deals."""
+        """Full HP and bullets; ``coef`` scales the damage red deals.
+
+        The per-robot arrays are rows of two packed arrays, ``fl`` (float, ``FL_*`` rows) and
+        ``it`` (int, ``IT_*`` rows), so the per-step kernel takes few arguments; ``hp``,
+        ``bullets`` and the rest are views into them (edit them in place, do not rebind).
+        """
         self.max_hp = max_hp.astype(np.float64)
-        self.hp = self.max_hp.copy()
-        self.bullets = np.full(self.n, float(F.START_BULLETS))
+        self.fl = np.zeros((6, self.n))
+        self.it = np.zeros((3, self.n), dtype=np.int64)
+        self.hp, self.bullets = self.fl[FL_HP], self.fl[FL_BULLETS]
+        self.damage_dealt, self.damage_taken = self.fl[FL_DEALT], self.fl[FL_TAKEN]
+        self.scale = self.fl[FL_SCALE]
+        self.kills, self.last_plate = self.it[IT_KILLS], self.it[IT_PLATE]
+        self.hp[:] = self.max_hp
+        self.bullets[:] = float(F.START_BULLETS)
+        self.scale[:] = np.where(self.team == RED, coef, 1.0)
+        self.it[IT_TEAM] = self.team
+        self.last_plate[:] = -1
         self.alive = np.ones(self.n, dtype=bool)
-        self.damage_dealt = np.zeros(self.n)
-        self.damage_taken = np.zeros(self.n)
-        self.kills = np.zeros(self.n, dtype=np.int64)
         self.coef = coef
-        self.scale = np.where(self.team == RED, coef, 1.0)
         self.winner: str | None = None
         self._both_alive = True
-        self.last_plate = np.full(self.n, -1, dtype=np.int64)
+
+    def draws(self) -> np.ndarray:
+        """This step's uniform numbers for sampled hits (empty for expected damage)."""
+        return self.rng.random(self.n) if self.sampled else _NO_DRAWS
 
     def physics_step(self, poses: np.ndarray, targets: np.ndarray, tally: StepTally) -> int:
         """Every live robot with bullets and a valid target fires once; apply the damage.
 
-        Returns how many robots were destroyed in this step.
+        Returns how many robots were destroyed in this step. (The arena's hot loop runs the
+        same kernel fused with the pose readout, :mod:`~neuronsmae.server.sim.stepper`.)
         """
-        draws = self.rng.random(self.n) if self.sampled else _NO_DRAWS
         destroyed = fire(
-            poses,
-            self.alive,
-            self.bullets,
-            self.hp,
-            targets,
-            self.team,
-            self.scale,
-            self.static_boxes,
-            self._robot_boxes,
-            F.ARMOR_TABLE,
-            draws,
-            self.last_plate,
-            self._dist,
-            self.damage_dealt,
-            self.damage_taken,
-            self.kills,
-            tally.damage,
-            tally.kills,
-        )
+            poses, self.alive, self.fl, self.it, targets, self.boxes, self.n_static,
+            self.draws(), tally.damage, tally.kills,
+        )  # fmt: skip
         if destroyed:
-            self._both_alive = bool(
-                self.alive[: self.n_blue].any() and self.alive[self.n_blue :].any()
-            )
+            self.after_kills()
         return destroyed
+
+    def after_kills(self) -> None:
+        """Bookkeeping after a step that destroyed robots: is the episode decided?"""
+        self._both_alive = bool(self.alive[: self.n_blue].any() and self.alive[self.n_blue :].any())
 
     def check_end(self, t: int, limit: int) -> bool:
         """Decide the winner on annihilation or at the time limit; return whether it ended."""

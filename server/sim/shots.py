@@ -24,6 +24,11 @@ MIN_INCIDENCE = math.radians(35.0)
 OCCLUSION_MARGIN = 0.08
 BANDS = np.array([3.0, 6.0], dtype=np.float64)
 FACTORS = np.array([1.0, 0.5, 0.2], dtype=np.float64)
+FL_HP, FL_BULLETS, FL_SCALE, FL_DIST, FL_DEALT, FL_TAKEN = range(6)
+"""Rows of the referee's packed float array: HP, bullets, damage scale, shot distance (scratch),
+damage dealt and taken."""
+IT_TEAM, IT_KILLS, IT_PLATE = range(3)
+"""Rows of the referee's packed int array: team, kills, plate hit this step (-1 for none)."""
 
 
 @nb.njit(cache=True)
@@ -38,8 +43,15 @@ def hit_factor(d: float) -> float:
 
 @nb.njit(cache=True)
 def segment_box_blocked(ax, ay, az, bx, by, bz, box) -> bool:
-    """Does the 3-D segment A→B pass through the vertical box (cx, cy, hx, hy, yaw, h)?"""
-    c, s = math.cos(box[4]), math.sin(box[4])
+    """Does the 3-D segment A→B pass through the vertical box (cx, cy, hx, hy, yaw, h)?
+
+    A row may carry cos(yaw), sin(yaw) in columns 6 and 7 (:func:`with_trig`), so the
+    per-step ray tests do not recompute them for every shooter and plate.
+    """
+    if box.shape[0] >= 8:
+        c, s = box[6], box[7]
+    else:
+        c, s = math.cos(box[4]), math.sin(box[4])
     # Into the box frame.
     px, py = ax - box[0], ay - box[1]
     lx0, ly0 = c * px + s * py, -s * px + c * py
@@ -63,15 +75,13 @@ def segment_box_blocked(ax, ay, az, bx, by, bz, box) -> bool:
 
 
 @nb.njit(cache=True)
-def select_shots(
-    poses, alive, bullets, targets, static_boxes, robot_boxes, plates, out_plate, out_dist
-):
+def select_shots(poses, alive, bullets, targets, boxes, n_static, plates, out_plate, out_dist):
     """For each robot, the plate of its target it hits this step (-1 for none).
 
     poses (N, 3); alive (N,) bool; bullets (N,) float; targets (N,) int robot index or -1;
-    static_boxes (S, 6) and robot_boxes (N, 6) as (cx, cy, hx, hy, yaw, height);
-    plates (4, 4) along, across, normal angle, multiplier. Writes out_plate (N,) int and
-    out_dist (N,) float (muzzle-to-plate distance of the chosen plate).
+    boxes (S + N, 6) as (cx, cy, hx, hy, yaw, height): the S = ``n_static`` tall obstacles,
+    then one row per robot; plates (4, 4) along, across, normal angle, multiplier. Writes
+    out_plate (N,) int and out_dist (N,) float (muzzle-to-plate distance of the chosen plate).
     """
     n = poses.shape[0]
     cos_inc = math.cos(math.pi / 2 - MIN_INCIDENCE)
@@ -113,8 +123,8 @@ def select_shots(
             ex, ey = mx + dx * f, my + dy * f
             ez = F.SHOOTER_HEIGHT + (F.ARMOR_HEIGHT - F.SHOOTER_HEIGHT) * f
             blocked = False
-            for b in range(static_boxes.shape[0]):
-                if segment_box_blocked(mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, static_boxes[b]):
+            for b in range(n_static):
+                if segment_box_blocked(mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, boxes[b]):
                     blocked = True
                     break
             if not blocked:
@@ -123,7 +133,7 @@ def select_shots(
                         r != s
                         and r != t
                         and segment_box_blocked(
-                            mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, robot_boxes[r]
+                            mx, my, F.SHOOTER_HEIGHT, ex, ey, ez, boxes[n_static + r]
                         )
                     ):
                         blocked = True
@@ -144,42 +154,44 @@ def fill_robot_boxes(poses, out):
         out[i, 3] = F.ROBOT_WIDTH / 2
         out[i, 4] = poses[i, 2]
         out[i, 5] = F.ROBOT_HEIGHT
+        if out.shape[1] >= 8:
+            out[i, 6] = math.cos(poses[i, 2])
+            out[i, 7] = math.sin(poses[i, 2])
 
 
 @nb.njit(cache=True)
-def fire(
-    poses,
-    alive,
-    bullets,
-    hp,
-    targets,
-    team,
-    scale,
-    static_boxes,
-    robot_boxes,
-    plates,
-    draws,
-    plate_out,
-    dist_out,
-    dealt_total,
-    taken_total,
-    kills,
-    tally_damage,
-    tally_kills,
-) -> int:
+def with_trig(boxes: np.ndarray) -> np.ndarray:
+    """Box rows (n, 6) → (n, 8) with cos(yaw), sin(yaw) appended (numba's math, the same
+    values :func:`segment_box_blocked` would compute)."""
+    out = np.empty((boxes.shape[0], 8))
+    for i in range(boxes.shape[0]):
+        out[i, :6] = boxes[i, :6]
+        out[i, 6] = math.cos(boxes[i, 4])
+        out[i, 7] = math.sin(boxes[i, 4])
+    return out
+
+
+@nb.njit(cache=True)
+def fire(poses, alive, fl, it, targets, boxes, n_static, draws, tally_damage, tally_kills) -> int:
     """One physics step of shooting: select shots, spend bullets, apply damage, count kills.
 
     Shots are simultaneous: all are chosen from the same poses before any damage lands.
-    ``draws`` (N,) holds uniform numbers for sampled hits, or is empty for expected damage.
-    A victim's actual HP loss is shared among its shooters in proportion to what each fired;
-    the kill goes to the shooter that dealt the most (lowest index on ties). Returns the
-    number of robots destroyed this step.
+    ``fl`` (6, N) and ``it`` (3, N) are the referee's packed per-robot rows (``FL_*`` and
+    ``IT_*``; few arguments keep numba's per-call dispatch cheap on this per-step path);
+    ``boxes`` (S + N, 8) the tall obstacles then scratch rows for the robots, with trig
+    columns (:func:`with_trig`). ``draws`` (N,)
+    holds uniform numbers for sampled hits, or is empty for expected damage. A victim's
+    actual HP loss is shared among its shooters in proportion to what each fired; the kill
+    goes to the shooter that dealt the most (lowest index on ties). Returns the number of
+    robots destroyed this step.
     """
+    hp, bullets, scale, dist_out = fl[FL_HP], fl[FL_BULLETS], fl[FL_SCALE], fl[FL_DIST]
+    dealt_total, taken_total = fl[FL_DEALT], fl[FL_TAKEN]
+    team, kills, plate_out = it[IT_TEAM], it[IT_KILLS], it[IT_PLATE]
+    plates = F.ARMOR_TABLE
     n = poses.shape[0]
-    fill_robot_boxes(poses, robot_boxes)
-    select_shots(
-        poses, alive, bullets, targets, static_boxes, robot_boxes, plates, plate_out, dist_out
-    )
+    fill_robot_boxes(poses, boxes[n_static:])
+    select_shots(poses, alive, bullets, targets, boxes, n_static, plates, plate_out, dist_out)
     raw = np.zeros(n)
     incoming = np.zeros(n)
     for s in range(n):

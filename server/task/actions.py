@@ -8,7 +8,6 @@ Bots produce intents of the abstract kind, so every robot is driven by the same 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -81,6 +80,16 @@ def _as_continuous(agent: int, action: Any, n_enemy: int, clip: bool) -> tuple[f
             f"agent {agent}: continuous action must be 4 numbers (vx, vy, omega, target), "
             f"got {action!r}"
         ) from None
+    if arr.shape == (4,):  # fast path: a well-formed in-bounds action (NaN fails every test)
+        vx, vy, w, target = arr.tolist()
+        if (
+            -V_MAX <= vx <= V_MAX
+            and -V_MAX <= vy <= V_MAX
+            and -W_MAX <= w <= W_MAX
+            and target.is_integer()
+            and 0 <= target < n_enemy
+        ):
+            return (vx, vy, w, int(target))
     if arr.shape != (4,):
         raise InvalidActionError(
             f"agent {agent}: continuous action must have shape (4,) (vx, vy, omega, target), "
@@ -118,6 +127,7 @@ class ActionDecoder:
         self.k = k
         self.clip = clip
         self.size = n_actions(space, n_enemy, k)
+        self._first = _first_only(k)
 
     def validate(self, actions: Sequence[Any], n_agents: int) -> list[Any]:
         """Raise InvalidActionError for a wrong count, type, index, NaN or bound."""
@@ -162,7 +172,7 @@ class ActionDecoder:
         else:
             # Candidate rows are all real or, for the "stay" sentinel, all not: then only the
             # first (stay) point of that enemy is offered.
-            block = np.where(cand_valid.any(axis=1)[:, None], True, _first_only(self.k))
+            block = cand_valid.any(axis=1)[:, None] | self._first
             m[:] = (block & enemy_alive[:, None]).reshape(-1)
         return m
 
@@ -171,10 +181,3 @@ def _first_only(k: int) -> np.ndarray:
     out = np.zeros(k, dtype=bool)
     out[0] = True
     return out
-
-
-def heading_rate(yaw: float, x: float, y: float, tx: float, ty: float, limit: float = 2.0) -> float:
-    """Auto-turn: ω equals the heading error toward the target, clamped to ±limit rad/s."""
-    err = math.atan2(ty - y, tx - x) - yaw
-    err = math.atan2(math.sin(err), math.cos(err))
-    return min(max(err, -limit), limit)

@@ -9,7 +9,9 @@ line of sight to the enemy (tall obstacles only); cluster the rest into ``k`` gr
 k-means and keep, for each centre, the nearest surviving point.
 
 The computation runs for every enemy of every robot at every decision, so it is one
-``numba`` kernel of a few tens of microseconds. The k-means is a deterministic Lloyd
+``numba`` kernel of a few tens of microseconds, and :func:`all_candidate_points` does a
+whole decision in one call, sharing the filter pass among the robots asking about the same
+enemy. The k-means is a deterministic Lloyd
 iteration written here rather than ``scipy.cluster.vq.kmeans2`` or scikit-learn: those
 cost on the order of milliseconds per call (about 100× this whole budget) and seed their
 centres randomly, which would make the observation depend on an RNG. Because the kept
@@ -51,14 +53,15 @@ OBSTACLE_MARGIN = SPAWN_OBSTACLE_MARGIN
 ROBOT_CLEARANCE = 0.6
 """A point is dropped when ``|dx| < 0.6`` and ``|dy| < 0.6`` from another robot."""
 MAX_LLOYD_ITERATIONS = 50
+FREE, DROPPED = -1, -2
+"""Sample codes of :func:`_filter_samples` (codes >= 0 name the one robot in the way)."""
 
 
 @numba.njit(cache=True)
-def _kept_samples(
+def _filter_samples(
     ex: float,
     ey: float,
     others: np.ndarray,
-    skip: int,
     boxes: np.ndarray,
     radius: float,
     n_samples: int,
@@ -69,8 +72,14 @@ def _kept_samples(
     margin: float,
     clearance: float,
     sight_min_height: float,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Sample the circle and filter it; returns (points, sample indices, count kept).
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample the circle and run the filters for every possible asker at once.
+
+    Returns ``(points (n_samples, 2), code (n_samples,))`` where ``code`` is ``FREE`` for a
+    sample every filter keeps, the index in ``others`` of the one robot whose square holds
+    it (kept only for that robot as the asker), or ``DROPPED``. One pass serves every robot
+    asking about the same enemy (:func:`_select` picks its samples); the filters are plain
+    conjunctions, so the kept set is the same as filtering for one asker directly.
 
     Filters run cheapest first (bounds, robot squares, grown obstacles, then sight), and
     only against the boxes that can matter for this circle: a box whose bounding circle
@@ -104,8 +113,7 @@ def _kept_samples(
             sight[n_sight] = i
             n_sight += 1
     pts = np.empty((n_samples, 2))
-    idx = np.empty(n_samples, dtype=np.int64)
-    n = 0
+    code = np.full(n_samples, DROPPED, dtype=np.int64)
     # Unit vectors by rotation recurrence: 2 trig calls instead of 2 per sample; the
     # accumulated error over 180 steps is ~1e-14 m.
     step = 2.0 * math.pi / n_samples
@@ -118,19 +126,20 @@ def _kept_samples(
             ux, uy = ux * cstep - uy * sstep, ux * sstep + uy * cstep
         x = ex + radius * ux
         y = ey + radius * uy
+        pts[j, 0] = x
+        pts[j, 1] = y
         if x < x_min or x > x_max or y < y_min or y > y_max:
             continue
-        ok = True
+        holder = FREE
         for r in range(others.shape[0]):
-            if (
-                r != skip
-                and abs(x - others[r, 0]) < clearance
-                and abs(y - others[r, 1]) < clearance
-            ):
-                ok = False
-                break
-        if not ok:
+            if abs(x - others[r, 0]) < clearance and abs(y - others[r, 1]) < clearance:
+                if holder != FREE:  # two robots: no asker can have it
+                    holder = DROPPED
+                    break
+                holder = r
+        if holder == DROPPED:
             continue
+        ok = True
         for q in range(n_grown):
             i = grown[q]
             if point_in_grown_box(x, y, boxes[i], frame[i, 0], frame[i, 1], margin):
@@ -155,13 +164,41 @@ def _kept_samples(
             if t0 <= t1:
                 ok = False
                 break
-        if not ok:
-            continue
-        pts[n, 0] = x
-        pts[n, 1] = y
-        idx[n] = j
-        n += 1
-    return pts, idx, n
+        if ok:
+            code[j] = holder
+    return pts, code
+
+
+@numba.njit(cache=True)
+def _select(
+    all_pts: np.ndarray, code: np.ndarray, skip: int, pts: np.ndarray, idx: np.ndarray
+) -> int:
+    """The samples kept for the asker ``skip`` (-1: none) into ``pts``/``idx``; the count."""
+    n = 0
+    for j in range(code.shape[0]):
+        if code[j] == FREE or (code[j] >= 0 and code[j] == skip):
+            pts[n, 0] = all_pts[j, 0]
+            pts[n, 1] = all_pts[j, 1]
+            idx[n] = j
+            n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _kept_samples(
+    ex: float, ey: float, others: np.ndarray, skip: int, boxes: np.ndarray, radius: float,
+    n_samples: int, x_min: float, x_max: float, y_min: float, y_max: float, margin: float,
+    clearance: float, sight_min_height: float,
+) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
+    """Sample the circle and filter it for one asker (``skip``, -1 for none: every robot's
+    square forbids points); returns (points, sample indices, count kept)."""
+    all_pts, code = _filter_samples(
+        ex, ey, others, boxes, radius, n_samples, x_min, x_max, y_min, y_max, margin,
+        clearance, sight_min_height,
+    )  # fmt: skip
+    pts = np.empty((n_samples, 2))
+    idx = np.empty(n_samples, dtype=np.int64)
+    return pts, idx, _select(all_pts, code, skip, pts, idx)
 
 
 @numba.njit(cache=True)
@@ -222,56 +259,42 @@ def _lloyd(
 
 @numba.njit(cache=True)
 def _candidates_kernel(
-    ex: float,
-    ey: float,
-    others: np.ndarray,
-    skip: int,
-    boxes: np.ndarray,
-    k: int,
-    radius: float,
-    n_samples: int,
-    x_min: float,
-    x_max: float,
-    y_min: float,
-    y_max: float,
-    margin: float,
-    clearance: float,
-    sight_min_height: float,
-    stay_x: float,
-    stay_y: float,
+    ex: float, ey: float, others: np.ndarray, skip: int, boxes: np.ndarray, k: int,
+    radius: float, n_samples: int, x_min: float, x_max: float, y_min: float, y_max: float,
+    margin: float, clearance: float, sight_min_height: float, stay_x: float, stay_y: float,
     max_iter: int,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The whole candidate-point computation for one enemy (see the module docstring)."""
     pts, idx, n = _kept_samples(
-        ex,
-        ey,
-        others,
-        skip,
-        boxes,
-        radius,
-        n_samples,
-        x_min,
-        x_max,
-        y_min,
-        y_max,
-        margin,
-        clearance,
-        sight_min_height,
-    )
+        ex, ey, others, skip, boxes, radius, n_samples, x_min, x_max, y_min, y_max, margin,
+        clearance, sight_min_height,
+    )  # fmt: skip
     out = np.empty((k, 2))
-    valid = np.ones(k, dtype=np.bool_)
+    valid = np.empty(k, dtype=np.bool_)
+    _choose(pts, idx, n, n_samples, stay_x, stay_y, max_iter, out, valid)
+    return out, valid
+
+
+@numba.njit(cache=True)
+def _choose(
+    pts: np.ndarray, idx: np.ndarray, n: int, n_samples: int, stay_x: float, stay_y: float,
+    max_iter: int, out: np.ndarray, valid: np.ndarray,
+) -> None:  # fmt: skip
+    """The ``k = len(out)`` points from the ``n`` kept samples, into ``out`` and ``valid``."""
+    k = out.shape[0]
+    valid[:] = True
     if n == 0:
         for c in range(k):
             out[c, 0] = stay_x
             out[c, 1] = stay_y
             valid[c] = False
-        return out, valid
+        return
     if n <= k:
         for c in range(k):
             p = min(c, n - 1)
             out[c, 0] = pts[p, 0]
             out[c, 1] = pts[p, 1]
-        return out, valid
+        return
     centres = _lloyd(pts, idx, n, k, n_samples, max_iter)
     # Nearest not-yet-taken kept point per centre, so the k outputs are distinct.
     taken = np.zeros(n, dtype=np.bool_)
@@ -295,7 +318,6 @@ def _candidates_kernel(
     for c in range(k):
         out[c, 0] = pts[chosen[c], 0]
         out[c, 1] = pts[chosen[c], 1]
-    return out, valid
 
 
 def _rows(a: np.ndarray, cols: int) -> np.ndarray:
@@ -382,3 +404,93 @@ def candidate_points(
         stay_y,
         MAX_LLOYD_ITERATIONS,
     )
+
+
+@numba.njit(cache=True)
+def _batch_kernel(
+    xy, alive, enemies, wanted, boxes, radius, n_samples, x_min, x_max, y_min, y_max,
+    margin, clearance, sight_min_height, max_iter, cands, valid,
+) -> None:  # fmt: skip
+    """Candidate points of every wanted live robot around each of its live enemies.
+
+    Works enemy by enemy: one filter pass serves every robot asking about that enemy, and
+    the k-means runs again only when an asker's kept samples differ from the previous
+    asker's (they differ only by samples in the askers' own squares). ``enemies`` (N, E)
+    lists each robot's enemies (-1 padding); rows of ``cands``/``valid`` nobody computes
+    keep the caller's "stay" sentinel.
+    """
+    n = xy.shape[0]
+    others = np.empty((n - 1, 2))
+    pts = np.empty((n_samples, 2))
+    idx = np.empty(n_samples, dtype=np.int64)
+    prev_idx = np.empty(n_samples, dtype=np.int64)
+    for e in range(n):
+        if not alive[e]:
+            continue
+        for r in range(n - 1):
+            q = r if r < e else r + 1
+            others[r, 0] = xy[q, 0]
+            others[r, 1] = xy[q, 1]
+        code = np.empty(0, dtype=np.int64)
+        all_pts = np.empty((0, 2))
+        filtered = False
+        prev_n, prev_i, prev_j = -1, -1, -1
+        for i in range(n):
+            if not (wanted[i] and alive[i]):
+                continue
+            for j in range(enemies.shape[1]):
+                if enemies[i, j] != e:
+                    continue
+                if not filtered:  # only for enemies someone asks about
+                    filtered = True
+                    all_pts, code = _filter_samples(
+                        xy[e, 0], xy[e, 1], others, boxes, radius, n_samples, x_min, x_max,
+                        y_min, y_max, margin, clearance, sight_min_height,
+                    )  # fmt: skip
+                m = _select(all_pts, code, i if i < e else i - 1, pts, idx)
+                same = m == prev_n and m > 0
+                for p in range(m if same else 0):
+                    if idx[p] != prev_idx[p]:
+                        same = False
+                        break
+                if same:
+                    cands[i, j] = cands[prev_i, prev_j]
+                    valid[i, j] = valid[prev_i, prev_j]
+                else:
+                    _choose(
+                        pts, idx, m, n_samples, xy[i, 0], xy[i, 1], max_iter, cands[i, j],
+                        valid[i, j],
+                    )  # fmt: skip
+                    prev_idx[:m] = idx[:m]
+                    prev_n, prev_i, prev_j = m, i, j
+
+
+def all_candidate_points(
+    xy: np.ndarray,
+    alive: np.ndarray,
+    enemies: np.ndarray,
+    wanted: np.ndarray,
+    boxes: np.ndarray,
+    k: int = K,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`candidate_points` for every wanted live robot around each of its live enemies.
+
+    ``xy`` (N, 2) positions, ``enemies`` (N, E) each robot's enemies (-1 padding), ``alive``
+    and ``wanted`` (N,) bool. Each robot asks as itself (``asker``: its own square does not
+    forbid points). Returns ``(cands (N, E, k, 2), valid (N, E, k))``; rows not computed
+    (robot or enemy destroyed, robot not wanted) hold the robot's own position, not valid.
+    One numba call for the whole decision, identical to calling :func:`candidate_points`
+    per pair.
+    """
+    xy = _rows(xy, 2)
+    n, n_enemy = enemies.shape
+    cands = np.empty((n, n_enemy, k, 2))
+    cands[...] = xy[:, None, None, :]
+    valid = np.zeros((n, n_enemy, k), dtype=bool)
+    x_min, x_max, y_min, y_max = BOUNDS
+    _batch_kernel(
+        xy, alive, enemies, wanted, _rows(boxes, 6), RADIUS, N_SAMPLES, x_min, x_max, y_min,
+        y_max, OBSTACLE_MARGIN, ROBOT_CLEARANCE, SIGHT_MIN_HEIGHT, MAX_LLOYD_ITERATIONS,
+        cands, valid,
+    )  # fmt: skip
+    return cands, valid

@@ -100,6 +100,34 @@ def vector_obs(
     return np.concatenate(parts)
 
 
+def vector_obs_batch(
+    order: np.ndarray,
+    n_team: int,
+    poses_n: np.ndarray,
+    cands_n: np.ndarray | None,
+    t_n: float,
+    hp_n: np.ndarray,
+    bul_n: np.ndarray,
+    seen: np.ndarray,
+    unseen: float,
+) -> np.ndarray:
+    """:func:`vector_obs` for A robots sharing one layout, one row each: (A, size).
+
+    ``order`` (A, n) is each robot's ``order``; ``cands_n`` (A, n_enemy, k, 2) or None;
+    ``seen`` (A, n_enemy). The same values as A calls of :func:`vector_obs`, in a few
+    array operations (this runs every decision).
+    """
+    a = order.shape[0]
+    poses = poses_n[order]
+    poses[:, n_team:][~seen] = unseen
+    parts = [poses.reshape(a, -1)]
+    if cands_n is not None:
+        cands_n[~seen] = unseen  # the caller's fresh array
+        parts.append(cands_n.reshape(a, -1))
+    parts += [np.full((a, 1), t_n), hp_n[order], bul_n[order]]
+    return np.concatenate(parts, axis=1)
+
+
 def global_state(
     poses_n: np.ndarray, hp_n: np.ndarray, bul_n: np.ndarray, t_n: float
 ) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuronsmae.server.sim import field as F
-from neuronsmae.server.task.candidates import candidate_points
+from neuronsmae.server.task.candidates import all_candidate_points
 from neuronsmae.server.task.geometry import (
     SIGHT_MIN_HEIGHT,
     lidar_scan,
@@ -29,28 +29,30 @@ def _without(n: int, *skip: int) -> np.ndarray:
 
 
 def all_candidates(
-    poses: np.ndarray, alive: np.ndarray, enemies_of: list[np.ndarray], k: int, wanted: np.ndarray
+    poses: np.ndarray,
+    alive: np.ndarray,
+    enemies_of: list[np.ndarray],
+    k: int,
+    wanted: np.ndarray,
+    table: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate points for every robot around each of its enemies.
 
     Returns ``(cands (N, n_enemy, k, 2), valid (N, n_enemy, k))``. Only robots flagged in
     ``wanted`` (those whose observation or bot needs them) are computed; a destroyed robot,
-    or a destroyed enemy, gets the "stay" sentinel (its own position, not valid).
+    or a destroyed enemy, gets the "stay" sentinel (its own position, not valid). ``table``
+    is ``enemy_table(enemies_of)`` when the caller keeps it.
     """
-    n = poses.shape[0]
-    n_enemy = max(len(e) for e in enemies_of)
-    cands = np.repeat(poses[:, None, None, :2], n_enemy, axis=1).repeat(k, axis=2)
-    valid = np.zeros((n, n_enemy, k), dtype=bool)
-    xy = np.ascontiguousarray(poses[:, :2])
-    for i in np.flatnonzero(wanted & alive):
-        for j, e in enumerate(enemies_of[i]):
-            if not alive[e]:
-                continue
-            others = xy[_without(n, e)]
-            asker = i if i < e else i - 1
-            pts, ok = candidate_points(xy[e], others, ALL_BOXES, k=k, asker=asker)
-            cands[i, j], valid[i, j] = pts, ok
-    return cands, valid
+    table = enemy_table(enemies_of) if table is None else table
+    return all_candidate_points(poses[:, :2], alive, table, wanted, ALL_BOXES, k)
+
+
+def enemy_table(enemies_of: list[np.ndarray]) -> np.ndarray:
+    """(N, n_enemy) int: each robot's enemies in observation order, -1 padded."""
+    table = np.full((len(enemies_of), max(len(e) for e in enemies_of)), -1, dtype=np.int64)
+    for i, e in enumerate(enemies_of):
+        table[i, : len(e)] = e
+    return table
 
 
 def sight(

@@ -26,6 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..sim import field
+from .control import follow  # noqa: F401  (re-exported: the follower lived here)
 
 SOFT_BASE = 8.0
 """Extra cost (in cell steps) of entering a grown-margin cell at its outer edge."""
@@ -380,70 +381,3 @@ class Planner:
         self.last_status = status
         self.no_path_count += bool(status & STATUS_NO_PATH)
         return self._out[:m].copy()
-
-
-@numba.njit(cache=True)
-def _follow_kernel(x, y, yaw, path, max_speed, slow_radius, stop_radius, lookahead, gain):
-    n = path.shape[0]
-    if n == 0:
-        return 0.0, 0.0
-    gx, gy = path[n - 1, 0], path[n - 1, 1]
-    d_goal = math.hypot(gx - x, gy - y)
-    if d_goal <= stop_radius:
-        return 0.0, 0.0
-    speed = max_speed if d_goal > slow_radius else min(max_speed, gain * d_goal)
-    # Closest point on the polyline, then walk ``lookahead`` further along it.
-    seg, best, px, py = 0, np.inf, path[0, 0], path[0, 1]
-    for k in range(n - 1):
-        ax, ay = path[k, 0], path[k, 1]
-        bx, by = path[k + 1, 0] - ax, path[k + 1, 1] - ay
-        l2 = bx * bx + by * by
-        u = 0.0 if l2 == 0.0 else min(max(((x - ax) * bx + (y - ay) * by) / l2, 0.0), 1.0)
-        d2 = (ax + u * bx - x) ** 2 + (ay + u * by - y) ** 2
-        if d2 < best:
-            seg, best, px, py = k, d2, ax + u * bx, ay + u * by
-    tx, ty, remaining = gx, gy, lookahead
-    for k in range(seg + 1, n):
-        ex, ey = path[k, 0], path[k, 1]
-        seg_len = math.hypot(ex - px, ey - py)
-        if seg_len >= remaining:
-            f = remaining / seg_len
-            tx, ty = px + (ex - px) * f, py + (ey - py) * f
-            break
-        remaining -= seg_len
-        px, py = ex, ey
-    dx, dy = tx - x, ty - y
-    norm = math.hypot(dx, dy)
-    if norm < 1e-9:
-        dx, dy, norm = gx - x, gy - y, d_goal
-    vx, vy = speed * dx / norm, speed * dy / norm
-    c, s = math.cos(yaw), math.sin(yaw)
-    return c * vx + s * vy, -s * vx + c * vy
-
-
-def follow(
-    pose: tuple[float, float, float],
-    path: np.ndarray | None,
-    goal_xy: np.ndarray,
-    max_speed: float = 2.0,
-    slow_radius: float = 0.5,
-    stop_radius: float = 0.15,
-    lookahead: float = 0.3,
-    slow_gain: float = 2.0,
-) -> tuple[float, float]:
-    """Body-frame translational command ``(v_forward, v_left)`` to follow ``path``.
-
-    Heads for the point ``lookahead`` metres along the path beyond the robot's closest point;
-    speed is ``max_speed`` beyond ``slow_radius`` of the path's end, ``slow_gain``·d inside it,
-    and 0 within ``stop_radius``. The path's end is the goal (it differs from ``goal_xy``
-    only when the planner moved an impassable goal). An empty path (no path) gives (0, 0);
-    ``path=None`` drives straight at ``goal_xy``. Turning is the caller's job.
-    """
-    if path is None:
-        path = np.asarray(goal_xy, np.float64).reshape(1, 2)
-    v = _follow_kernel(
-        float(pose[0]), float(pose[1]), float(pose[2]),
-        np.ascontiguousarray(path, dtype=np.float64), float(max_speed), float(slow_radius),
-        float(stop_radius), float(lookahead), float(slow_gain),
-    )  # fmt: skip
-    return float(v[0]), float(v[1])
