@@ -186,7 +186,9 @@ class Arena(ArenaAPI):
             raise ResetNeededError("get_avail_actions() needs an episode: call reset() first")
         alive = self.referee.alive
         return [
-            self.decoder.mask(bool(alive[i]), alive[self.enemies_of[i]], self.valid[i])
+            self.decoder.mask(
+                bool(alive[i]), alive[self.enemies_of[i]], self.valid[i, : len(self.enemies_of[i])]
+            )
             for i in self.agents
         ]
 
@@ -280,15 +282,16 @@ class Arena(ArenaAPI):
             self._obs = []
             return
         if cfg.vector_obs:  # agents share one layout (competitive needs equal teams)
-            vec = O.vector_obs_batch(
+            ne = len(self.enemies_of[agents[0]])  # sight and candidates are as wide as the
+            vec = O.vector_obs_batch(  # largest team: a 3 v 2 blue agent has 2 enemies
                 self._agent_order,
                 len(self.mates_of[agents[0]]),
                 O.norm_pose(self.poses),
-                O.norm_xy(self.cands[agents]) if cfg.with_candidates else None,
+                O.norm_xy(self.cands[agents, :ne]) if cfg.with_candidates else None,
                 O.norm_time(self.t, cfg.episode_steps),
                 O.norm_hp(ref.hp, ref.max_hp),
                 O.norm_bullets(ref.bullets),
-                seen[agents],
+                seen[agents, :ne],
                 cfg.unseen_value,
             )
         if not cfg.lidar:

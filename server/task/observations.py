@@ -72,34 +72,6 @@ def norm_bullets(bullets: np.ndarray) -> np.ndarray:
     return 2.0 * bullets / F.START_BULLETS - 1.0
 
 
-def vector_obs(
-    order: np.ndarray,
-    n_team: int,
-    poses_n: np.ndarray,
-    cands_n: np.ndarray | None,
-    t_n: float,
-    hp_n: np.ndarray,
-    bul_n: np.ndarray,
-    seen: np.ndarray,
-    unseen: float,
-) -> np.ndarray:
-    """One robot's vector.
-
-    ``order`` lists robot indices as self, allies, enemies; ``poses_n``, ``hp_n``, ``bul_n``
-    are normalised per robot; ``cands_n`` (n_enemy, k, 2) normalised or None; ``seen``
-    (n_enemy,) bool says which enemies this robot currently sees.
-    """
-    poses = poses_n[order].copy()
-    poses[n_team:][~seen] = unseen
-    parts = [poses.reshape(-1)]
-    if cands_n is not None:
-        cands = cands_n.copy()
-        cands[~seen] = unseen
-        parts.append(cands.reshape(-1))
-    parts += [np.array([t_n]), hp_n[order], bul_n[order]]
-    return np.concatenate(parts)
-
-
 def vector_obs_batch(
     order: np.ndarray,
     n_team: int,
@@ -111,11 +83,13 @@ def vector_obs_batch(
     seen: np.ndarray,
     unseen: float,
 ) -> np.ndarray:
-    """:func:`vector_obs` for A robots sharing one layout, one row each: (A, size).
+    """The vectors of A robots sharing one layout, one row each: (A, size).
 
-    ``order`` (A, n) is each robot's ``order``; ``cands_n`` (A, n_enemy, k, 2) or None;
-    ``seen`` (A, n_enemy). The same values as A calls of :func:`vector_obs`, in a few
-    array operations (this runs every decision).
+    ``order`` (A, n) lists each robot's robot indices as self, allies, enemies;
+    ``poses_n``, ``hp_n``, ``bul_n`` are normalised per robot; ``cands_n``
+    (A, n_enemy, k, 2) normalised or None (filled with ``unseen`` in place where unseen, so
+    pass a fresh array); ``seen`` (A, n_enemy) says which enemies each robot sees. All
+    robots at once in a few array operations, because this runs every decision.
     """
     a = order.shape[0]
     poses = poses_n[order]

@@ -86,6 +86,29 @@ def test_layout_formula_for_team_sizes(n: int) -> None:
     a.close()
 
 
+@pytest.mark.parametrize("n_blue,n_red", [(3, 2), (2, 1), (3, 1), (1, 3)])
+@pytest.mark.parametrize("observability", ["full", "partial"])
+def test_unequal_teams_follow_the_layout_formula(
+    n_blue: int, n_red: int, observability: str
+) -> None:
+    # The learning team's vectors, masks and state stay sized by its own enemy count even
+    # when the other team is larger or smaller (sight and candidates are computed for all).
+    a = Arena(seed=1, n_blue=n_blue, n_red=n_red, observability=observability)
+    obs = a.reset()
+    info = a.get_env_info()
+    assert info["obs_shape"] == 3 * (n_blue + n_red) + 2 * 4 * n_red + 1 + 2 * (n_blue + n_red)
+    assert info["n_actions"] == 4 * n_red
+    for _ in range(5):
+        masks = a.get_avail_actions()
+        assert [m.shape for m in masks] == [(info["n_actions"],)] * n_blue
+        assert all(o.shape == (info["obs_shape"],) for o in obs)
+        assert a.get_state().shape == (info["state_shape"],)
+        obs, _, done, _ = a.step([int(np.flatnonzero(m)[-1]) for m in masks])
+        if done:
+            break
+    a.close()
+
+
 def test_state_is_global_not_an_observation() -> None:
     a, _ = _scene(action_space="abstract", observability="partial")
     s = a.get_state()
