@@ -50,6 +50,7 @@ class Link:
                 timeout=timeout,
                 consolidation=zenoh.ConsolidationMode.NONE,
                 target=zenoh.QueryTarget.BEST_MATCHING,
+                express=True,  # sent at once, never held back to batch with others
             )
             self._queriers[timeout] = querier
         return querier

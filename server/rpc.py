@@ -173,6 +173,6 @@ class RpcServer:
         else:
             reply = self.service.handle(payload.to_bytes() if payload is not None else b"")
         try:
-            query.reply(self.key, reply)
+            query.reply(self.key, reply, express=True)  # one RPC reply: never batched
         except zenoh.ZError as exc:  # the querier gave up (timeout) or went away
             log.debug("reply not delivered: %s", exc)
