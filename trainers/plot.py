@@ -57,11 +57,15 @@ class Run:
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent."""
+    """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent.
+
+    Of ``eval.csv`` only the periodic (validation) rows form the curve: the final test-seed
+    rows repeat the last step with other seeds or other weights.
+    """
     if not path.is_file():
         return {}
     with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+        rows = [r for r in csv.DictReader(f) if r.get("split") in (None, "", "validation")]
     if not rows:
         return {}
     return {key: np.array([_num(r.get(key)) for r in rows]) for key in rows[0]}
