@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import statistics
 import time
 from typing import Any
@@ -90,7 +91,12 @@ def main() -> None:
     parser.add_argument("--base-port", type=int, default=12000)
     args = parser.parse_args()
 
-    ray.init(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=False)
+    # Every sampler's actors live at once (rounds interleave), so Ray must be told there
+    # are enough CPUs for all of them; they still share the machine's real cores.
+    cpus = math.ceil(sum(args.workers) * args.worker_cpus) + 1
+    ray.init(
+        num_cpus=cpus, include_dashboard=False, logging_level=logging.WARNING, log_to_driver=False
+    )
     local = RolloutWorker(0, "inprocess", 1, args.base_port - 1)
     policy = make_policy(local.env_info())
     samplers: dict[int, Sampler] = {}
