@@ -94,10 +94,22 @@ class RNNAgent(nn.Module):
         out, hidden = self.rnn(x, hidden)
         q = self.fc2(out)
         if self.point_head is not None:
-            per_action = inputs[..., self.action_index]  # [B, T, A, F]
-            h = out.unsqueeze(-2).expand(*per_action.shape[:-1], out.shape[-1])
-            q = q + self.point_head(torch.cat([h, per_action], dim=-1)).squeeze(-1)
+            q = q + self._score_points(out, inputs[..., self.action_index])
         return q, hidden
+
+    def _score_points(self, out: torch.Tensor, per_action: torch.Tensor) -> torch.Tensor:
+        """The point head on ``[out, per_action]`` for every action: ``[B, T, A]``.
+
+        ``out [B, T, H]`` is shared by the A actions, so the first layer's product with it is
+        taken once per step and broadcast, instead of once per action on a concatenated
+        ``[B, T, A, H + F]`` tensor: the same function and parameters at about a ninth of the
+        cost of the largest matrix product of an update.
+        """
+        assert self.point_head is not None
+        first, act, last = self.point_head
+        w_out, w_act = first.weight.split([self.hidden_dim, per_action.shape[-1]], dim=1)
+        pre = F.linear(out, w_out, first.bias).unsqueeze(-2) + F.linear(per_action, w_act)
+        return last(act(pre)).squeeze(-1)
 
 
 def masked_greedy(q: torch.Tensor, avail: torch.Tensor) -> torch.Tensor:
