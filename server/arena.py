@@ -39,6 +39,10 @@ auto-turn are recomputed this often and held in between, like the released build
 discrete decisions."""
 
 
+_NO_CANDS = np.zeros((0, 1, 1, 2))
+"""Stands for the candidate points in an observation layout without them."""
+
+
 @inherit_docstrings
 class Arena(ArenaAPI):
     """One battle on the RMUA field, simulated in this process.
@@ -61,6 +65,9 @@ class Arena(ArenaAPI):
         self.agents = self._controlled(cfg.mode)
         # Per-robot index tables used every decision, built once.
         self.team_robots = {t: np.flatnonzero(self.team == t) for t in (BLUE, RED)}
+        self._span = {BLUE: (0, self.n_blue), RED: (self.n_blue, self.n)}
+        self._agent_list = self.agents.tolist()
+        self._agent_team = self.team[self.agents].tolist()
         self._order = [
             np.concatenate([self.mates_of[i], self.enemies_of[i]]) for i in range(self.n)
         ]
@@ -70,6 +77,12 @@ class Arena(ArenaAPI):
             len(self.agents), self.n
         )
         self._wanted_mask = np.zeros(self.n, dtype=bool)
+        # The agents' shared observation layout (see _perceive): its vector part's size, and
+        # the sight of every enemy under full observability.
+        first = int(self.agents[0]) if len(self.agents) else 0
+        n_team, n_enemy = len(self.mates_of[first]), len(self.enemies_of[first])
+        self._seen_all = np.ones((len(self.agents), n_enemy), dtype=bool)
+        self._vec_size = O.obs_size(n_team, n_enemy, cfg.k, cfg.with_candidates, True, False)
         self.world = World(self.n, gui=cfg.gui, n_blue=cfg.n_blue)
         self.chassis = Chassis(self.n)
         self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
@@ -149,19 +162,28 @@ class Arena(ArenaAPI):
         intents = self._intents(checked)
         orders = Orders(intents, self._plan(intents))
         tally = StepTally.zero()
-        for k in range(self.config.period):
-            if k % CONTROL_EVERY == 0:  # velocity commands, held until the next update
-                orders.apply(self.poses, self.referee.alive, self.cmd)
-            self._physics_step(tally)
-            if self.done:
-                break
+        cfg = self.config
+        if self.zones is None:  # the whole decision in the stepper, one numba call per step
+            self.t = self.stepper.run(
+                self.poses, self.cmd, self.targets, orders, self.t, cfg.episode_steps,
+                cfg.period, CONTROL_EVERY, tally,
+            )  # fmt: skip
+            self.done = self.referee.check_end(self.t, cfg.episode_steps)
+        else:
+            for k in range(cfg.period):
+                if k % CONTROL_EVERY == 0:  # velocity commands, held until the next update
+                    orders.apply(self.poses, self.referee.alive, self.cmd)
+                self._physics_step(tally)
+                if self.done:
+                    break
         team_r, parts = self.referee.team_rewards(tally, self.config.reward == "dense")
         self._perceive()
-        rewards = [float(team_r[self.team[i]]) for i in self.agents]
+        team_reward = team_r.tolist()
+        rewards = [team_reward[team] for team in self._agent_team]
         info = self.referee.info() | {
             "t": self.t,
             "components": parts,
-            "team_reward": team_r.tolist(),
+            "team_reward": team_reward,
             "targets": self.targets.tolist(),
             "contacts": self.world.contacts(),
         }
@@ -269,72 +291,81 @@ class Arena(ArenaAPI):
         self.cands, self.valid = P.all_candidates(
             self.poses, ref.alive, self.enemies_of, cfg.k, self._wanted_mask, self._enemy_table
         )
-        seen = P.sight(
-            self.poses,
-            ref.alive,
-            self.targets,
-            self.enemies_of,
-            np.deg2rad(cfg.camera_hfov_deg),
-            cfg.observability == "partial",
-        )
         agents, vec = self.agents, None
         if len(agents) == 0:  # "bots" mode: nobody observes
             self._obs = []
             return
-        if cfg.vector_obs:  # agents share one layout (competitive needs equal teams)
-            ne = len(self.enemies_of[agents[0]])  # sight and candidates are as wide as the
-            vec = O.vector_obs_batch(  # largest team: a 3 v 2 blue agent has 2 enemies
+        # Agents share one layout (competitive needs equal teams); sight and candidates are
+        # as wide as the largest team: a 3 v 2 blue agent has 2 enemies.
+        ne = len(self.enemies_of[agents[0]])
+        if cfg.observability == "partial":
+            seen = P.sight(
+                self.poses,
+                ref.alive,
+                self.targets,
+                self.enemies_of,
+                np.deg2rad(cfg.camera_hfov_deg),
+                True,
+            )[agents, :ne]
+        else:  # P.sight's answer under full observability: every enemy is seen
+            seen = self._seen_all
+        if cfg.vector_obs:
+            vec = np.empty((len(agents), self._vec_size), dtype=np.float32)
+            O.vector_obs_kernel(
                 self._agent_order,
                 len(self.mates_of[agents[0]]),
-                O.norm_pose(self.poses),
-                O.norm_xy(self.cands[agents, :ne]) if cfg.with_candidates else None,
+                self.poses,
+                agents,
+                self.cands if cfg.with_candidates else _NO_CANDS,
                 O.norm_time(self.t, cfg.episode_steps),
-                O.norm_hp(ref.hp, ref.max_hp),
-                O.norm_bullets(ref.bullets),
-                seen[agents, :ne],
+                ref.hp,
+                ref.max_hp,
+                ref.bullets,
+                seen,
                 cfg.unseen_value,
+                vec,
             )
         if not cfg.lidar:
-            self._obs = list(vec.astype(np.float32))  # type: ignore[union-attr]
+            self._obs = list(vec)  # type: ignore[arg-type]
             return
         obs = []
         for a, i in enumerate(self.agents):
-            scan = P.lidar(self.poses, i, cfg.lidar_range)
-            parts = [scan] if vec is None else [vec[a], scan]
-            obs.append(np.concatenate(parts).astype(np.float32))
+            scan = P.lidar(self.poses, i, cfg.lidar_range).astype(np.float32)
+            obs.append(scan if vec is None else np.concatenate([vec[a], scan]))
         self._obs = obs
 
     def _intents(self, actions: list[Any]) -> list[Intent]:
         """Per-robot intents from the agents' actions and the bots' choices."""
-        intents: list[Intent | None] = [None] * self.n
-        for a, i in zip(actions, self.agents, strict=True):
-            intents[i] = self.decoder.decode(a, self.enemies_of[i], self.cands[i])
+        ref, enemies_of, cands = self.referee, self.enemies_of, self.cands
+        live = ref.alive.tolist()
+        decode = self.decoder.decode
+        intents: list[Any] = [None] * self.n
+        for a, i in zip(actions, self._agent_list, strict=True):
+            intents[i] = decode(a, enemies_of[i], cands[i])
         for team, bot in self.bots.items():
             if bot is None:
                 continue
-            robots = self.team_robots[team]
-            if not self.referee.alive[robots].any():
+            lo, hi = self._span[team]  # a team's robots are consecutive
+            if not any(live[lo:hi]):
                 continue
             view = BotView(
-                robots,
-                self.enemies_of[robots[0]],
+                self.team_robots[team],
+                enemies_of[lo],
                 self.poses,
-                self.referee.hp,
-                self.referee.max_hp,
-                self.referee.alive,
-                self.cands[robots],
-                self.valid[robots],
+                ref.hp,
+                ref.max_hp,
+                ref.alive,
+                cands[lo:hi].copy(),
+                self.valid[lo:hi].copy(),
             )
-            for r, (e, c) in zip(robots, bot.act(view), strict=True):
-                intents[r] = Intent(int(self.enemies_of[r][e]), KIND_GOAL, goal=self.cands[r, e, c])
-        result = []
+            for r, (e, c) in zip(range(lo, hi), bot.act(view), strict=True):
+                intents[r] = Intent(int(enemies_of[r][e]), KIND_GOAL, goal=cands[r, e, c])
+        targets = self.targets
         for i, intent in enumerate(intents):
-            assert intent is not None
-            if not self.referee.alive[intent.target]:
+            if not live[intent.target]:
                 intent.target = self._nearest_enemy(i)
-            self.targets[i] = intent.target
-            result.append(intent)
-        return result
+            targets[i] = intent.target
+        return intents
 
     def _plan(self, intents: list[Intent]) -> list[np.ndarray | None]:
         xy = self.poses[:, :2]

@@ -134,9 +134,10 @@ class Referee:
         if self.winner in TEAM_NAMES:
             win = 1.0 if self.winner == "blue" else -1.0
         if dense:
+            damage, kills = tally.damage.tolist(), tally.kills.tolist()
             parts = {
-                "damage": R_DAMAGE * float(tally.damage[BLUE] - tally.damage[RED]),
-                "kill": R_KILL * float(tally.kills[BLUE] - tally.kills[RED]),
+                "damage": R_DAMAGE * (damage[BLUE] - damage[RED]),
+                "kill": R_KILL * (kills[BLUE] - kills[RED]),
                 "win": R_WIN * win,
             }
         else:

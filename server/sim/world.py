@@ -178,16 +178,29 @@ class World:
             if flagged:
                 self._place(body, (x, y, ROBOT_Z), yaw)
 
+    def replace(self, mask: int, poses: np.ndarray) -> None:
+        """:meth:`fix` for the robots in the bit mask ``mask`` (robot ``i`` at ``1 << i``)."""
+        reset, cid, i = pb.resetBasePositionAndOrientation, self.client, 0
+        while mask:
+            if mask & 1:
+                x, y, yaw = poses[i].tolist()
+                q = (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))  # as in _place
+                reset(self.bodies[i], (x, y, ROBOT_Z), q, cid)
+            mask >>= 1
+            i += 1
+
     def contacts(self) -> list[int]:
         """Contact points each robot has right now (walls, obstacles or robots); 0 = free."""
-        index = {body: i for i, body in enumerate(self.bodies)}
+        robot = {body: i for i, body in enumerate(self.bodies)}.get
         counts = [0] * len(self.bodies)
         # One query for the whole world (a robot-robot contact counts for both robots, as
         # querying each robot would) instead of one round trip per robot.
         for contact in pb.getContactPoints(physicsClientId=self.client):
-            for body in contact[1:3]:
-                if body in index:
-                    counts[index[body]] += 1
+            a, b = robot(contact[1]), robot(contact[2])
+            if a is not None:
+                counts[a] += 1
+            if b is not None:
+                counts[b] += 1
         return counts
 
     def _place(self, body: int, pos: tuple[float, float, float], yaw: float) -> None:
@@ -239,6 +252,18 @@ def world_velocity(
 
 
 @numba.njit(cache=True)
+def _settle_one(i, x, y, z, qx, qy, qz, qw, poses, alive, fix) -> bool:
+    """Robot ``i``'s part of :func:`settle_poses`; returns its ``fix`` flag."""
+    if not alive[i]:
+        fix[i] = x != poses[i, 0] or y != poses[i, 1]
+    else:
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        fix[i] = abs(z - ROBOT_Z) > PLANE_TOL or abs(qx) > PLANE_TOL or abs(qy) > PLANE_TOL
+        poses[i, 0], poses[i, 1], poses[i, 2] = x, y, yaw
+    return fix[i]
+
+
+@numba.njit(cache=True)
 def settle_poses(raw: np.ndarray, poses: np.ndarray, alive: np.ndarray, fix: np.ndarray) -> int:
     """Planar poses from PyBullet's flat readout ``raw`` (7N,), in place; flag robots to
     re-place.
@@ -250,13 +275,20 @@ def settle_poses(raw: np.ndarray, poses: np.ndarray, alive: np.ndarray, fix: np.
     n_fix = 0
     for i in range(poses.shape[0]):
         r = 7 * i
-        x, y, z = raw[r], raw[r + 1], raw[r + 2]
-        qx, qy, qz, qw = raw[r + 3], raw[r + 4], raw[r + 5], raw[r + 6]
-        if not alive[i]:
-            fix[i] = x != poses[i, 0] or y != poses[i, 1]
-        else:
-            yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-            fix[i] = abs(z - ROBOT_Z) > PLANE_TOL or abs(qx) > PLANE_TOL or abs(qy) > PLANE_TOL
-            poses[i, 0], poses[i, 1], poses[i, 2] = x, y, yaw
-        n_fix += fix[i]
+        n_fix += _settle_one(
+            i, raw[r], raw[r + 1], raw[r + 2], raw[r + 3], raw[r + 4], raw[r + 5], raw[r + 6],
+            poses, alive, fix,
+        )  # fmt: skip
+    return n_fix
+
+
+@numba.njit(cache=True)
+def settle_readout(readout, poses: np.ndarray, alive: np.ndarray, fix: np.ndarray) -> int:
+    """:func:`settle_poses` on PyBullet's own answers, a tuple holding each robot's
+    ``getBasePositionAndOrientation`` ``((x, y, z), (qx, qy, qz, qw))``: no flat array to
+    build in Python."""
+    n_fix = 0
+    for i in range(poses.shape[0]):
+        (x, y, z), (qx, qy, qz, qw) = readout[i]
+        n_fix += _settle_one(i, x, y, z, qx, qy, qz, qw, poses, alive, fix)
     return n_fix

@@ -475,17 +475,24 @@ def all_candidate_points(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`candidate_points` for every wanted live robot around each of its live enemies.
 
-    ``xy`` (N, 2) positions, ``enemies`` (N, E) each robot's enemies (-1 padding), ``alive``
-    and ``wanted`` (N,) bool. Each robot asks as itself (``asker``: its own square does not
-    forbid points). Returns ``(cands (N, E, k, 2), valid (N, E, k))``; rows not computed
-    (robot or enemy destroyed, robot not wanted) hold the robot's own position, not valid.
-    One numba call for the whole decision, identical to calling :func:`candidate_points`
-    per pair.
+    ``xy`` (N, 2) positions, or (N, 3) poses whose first two columns are used, ``enemies``
+    (N, E) each robot's enemies (-1 padding), ``alive`` and ``wanted`` (N,) bool. Each robot
+    asks as itself (``asker``: its own square does not forbid points). Returns
+    ``(cands (N, E, k, 2), valid (N, E, k))``; rows not computed (robot or enemy destroyed,
+    robot not wanted) hold the robot's own position, not valid. One numba call for the whole
+    decision, identical to calling :func:`candidate_points` per pair.
     """
-    xy = _rows(xy, 2)
+    if not (
+        type(xy) is np.ndarray
+        and xy.dtype == np.float64
+        and xy.ndim == 2
+        and xy.shape[1] in (2, 3)
+        and xy.flags.c_contiguous
+    ):  # the kernel reads columns 0 and 1 of any C-contiguous (N, 2) or (N, 3) array
+        xy = _rows(xy, 2)
     n, n_enemy = enemies.shape
     cands = np.empty((n, n_enemy, k, 2))
-    cands[...] = xy[:, None, None, :]
+    cands[...] = xy[:, None, None, :2]
     valid = np.zeros((n, n_enemy, k), dtype=bool)
     x_min, x_max, y_min, y_max = BOUNDS
     _batch_kernel(

@@ -105,7 +105,7 @@ def follow(
 
 
 @numba.njit(cache=True)
-def _control_kernel(poses, alive, intent, pts, off, cmd) -> None:
+def control_kernel(poses, alive, intent, pts, off, cmd) -> None:
     """Every robot's command (forward, left, ω) into ``cmd`` (N, 3); see :class:`Orders`."""
     for i in range(poses.shape[0]):
         kind = int(intent[i, 0])
@@ -151,4 +151,4 @@ class Orders:
     def apply(self, poses: np.ndarray, alive: np.ndarray, cmd: np.ndarray) -> None:
         """Write every robot's command for the current poses into ``cmd`` (N, 3), in place;
         destroyed robots get zero."""
-        _control_kernel(poses, alive, self.intent, self.pts, self.off, cmd)
+        control_kernel(poses, alive, self.intent, self.pts, self.off, cmd)

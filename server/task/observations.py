@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from neuronsmae.server.sim import field as F
@@ -100,6 +101,56 @@ def vector_obs_batch(
         parts.append(cands_n.reshape(a, -1))
     parts += [np.full((a, 1), t_n), hp_n[order], bul_n[order]]
     return np.concatenate(parts, axis=1)
+
+
+@numba.njit(cache=True)
+def _norm_yaw1(yaw: float) -> float:
+    """:func:`norm_yaw` of one value (numba's ``np.mod`` is NumPy's floored remainder)."""
+    return (np.mod(yaw + np.pi, 2 * np.pi) - np.pi) / np.pi
+
+
+@numba.njit(cache=True)
+def vector_obs_kernel(order, n_team, poses, agents, cands, t_n, hp, max_hp, bullets, seen,
+                      unseen, out) -> None:  # fmt: skip
+    """:func:`vector_obs_batch` from raw values in one pass, into ``out`` (A, size).
+
+    ``poses`` (N, 3), ``hp``, ``max_hp``, ``bullets`` (N,) are the referee's raw values and
+    are normalised here with the same operations as :func:`norm_pose`, :func:`norm_hp` and
+    :func:`norm_bullets`, so the result is bit-identical to the array version; ``cands``
+    (N, E, k, 2) are every robot's raw candidate points (agent ``a`` reads robot
+    ``agents[a]``'s), or an empty array for a layout without them; ``t_n`` is
+    :func:`norm_time`. ``out`` may be float32: values are rounded once, as by ``astype``.
+    """
+    n = order.shape[1]
+    with_cands = cands.shape[0] > 0
+    k = cands.shape[2]
+    for a in range(order.shape[0]):
+        c = 0
+        for j in range(n):
+            r = order[a, j]
+            if j >= n_team and not seen[a, j - n_team]:
+                out[a, c], out[a, c + 1], out[a, c + 2] = unseen, unseen, unseen
+            else:
+                out[a, c] = (poses[r, 0] - HALF_X) / HALF_X
+                out[a, c + 1] = (poses[r, 1] - HALF_Y) / HALF_Y
+                out[a, c + 2] = _norm_yaw1(poses[r, 2])
+            c += 3
+        if with_cands:
+            i = agents[a]
+            for e in range(n - n_team):
+                for q in range(k):
+                    if seen[a, e]:
+                        out[a, c] = (cands[i, e, q, 0] - HALF_X) / HALF_X
+                        out[a, c + 1] = (cands[i, e, q, 1] - HALF_Y) / HALF_Y
+                    else:
+                        out[a, c], out[a, c + 1] = unseen, unseen
+                    c += 2
+        out[a, c] = t_n
+        c += 1
+        for j in range(n):
+            r = order[a, j]
+            out[a, c + j] = 2.0 * hp[r] / max_hp[r] - 1.0
+            out[a, c + n + j] = 2.0 * bullets[r] / F.START_BULLETS - 1.0
 
 
 def global_state(

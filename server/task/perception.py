@@ -44,7 +44,7 @@ def all_candidates(
     is ``enemy_table(enemies_of)`` when the caller keeps it.
     """
     table = enemy_table(enemies_of) if table is None else table
-    return all_candidate_points(poses[:, :2], alive, table, wanted, ALL_BOXES, k)
+    return all_candidate_points(poses, alive, table, wanted, ALL_BOXES, k)
 
 
 def enemy_table(enemies_of: list[np.ndarray]) -> np.ndarray:
