@@ -29,7 +29,42 @@ def _view(blue: list, enemy_hp: tuple = (300.0, 600.0), cands=AROUND, alive=None
 
 def test_middle_focuses_the_least_hp_enemy_even_when_the_other_is_nearer() -> None:
     view = _view([(6.8, 3.6), (6.6, 3.8)])
+    assert [e for e, _ in MiddleBot(np.random.default_rng(0)).act(view)] == [0, 0]
+
+
+def test_middle_ties_go_to_the_enemy_nearest_the_team() -> None:
+    view = _view([(6.8, 3.6), (6.6, 3.8)], enemy_hp=(600.0, 600.0))
+    assert [e for e, _ in MiddleBot(np.random.default_rng(0)).act(view)] == [1, 1]
+
+
+def test_middle_robots_on_one_target_do_not_share_a_point() -> None:
+    # Both robots stand by the front point, each robot's nearest. One keeps it; the other
+    # takes the nearest point clear of it, the right one for the robot below the axis.
+    view = _view([(6.8, 2.6), (6.8, 1.4)])
+    assert MiddleBot(np.random.default_rng(0)).act(view) == [(0, 0), (0, 3)]
+
+
+def test_middle_shares_points_by_travel_not_robot_order() -> None:
+    view = _view([(6.8, 1.4), (6.8, 2.6)])
+    assert MiddleBot(np.random.default_rng(0)).act(view) == [(0, 3), (0, 0)]
+
+
+def test_middle_keeps_nearest_points_that_are_already_apart() -> None:
+    view = _view([(6.3, 2.0), (4.0, 4.0)])
+    assert MiddleBot(np.random.default_rng(0)).act(view) == [(0, 0), (0, 1)]
+
+
+def test_middle_points_crowd_within_the_clearance_squares() -> None:
+    # (5.5, 3.0) is 1.4 m from the front point but within 1.2 m of it in both x and y, so
+    # every pair crowds and each robot falls back to its own nearest point.
+    cands = np.array([(6.5, 2.0), (5.5, 3.0), (6.5, 2.0), (6.5, 2.0)])
+    view = _view([(6.9, 2.1), (6.9, 1.9)], cands=cands)
     assert MiddleBot(np.random.default_rng(0)).act(view) == [(0, 0), (0, 0)]
+
+
+def test_middle_lone_survivor_takes_its_nearest_point() -> None:
+    view = _view([(6.8, 2.6), (6.8, 1.4)], alive=[True, False, True, True])
+    assert MiddleBot(np.random.default_rng(0)).act(view)[0] == (0, 0)
 
 
 def test_hard_holder_keeps_the_front_and_flanker_takes_the_rear() -> None:
