@@ -44,6 +44,11 @@ def test_serve_restarts_a_killed_server_and_stops_on_sigterm(spawn: Spawn, tmp_p
         return all(r["state"] == "up" and r["pid"] for r in _status(base, 2, state))
 
     wait_for(all_up, 240, "both servers")
+    # Answering pings is not enough: until the fleet's own start-up check has seen both
+    # servers, a server that dies is a start-up failure (the fleet exits with an error, by
+    # design), not a crash to restart. Supervision begins with this log line.
+    fleet_log = tmp_path / "fleet-0.log"
+    wait_for(lambda: "serving 2 arenas" in fleet_log.read_text(), 60, "supervision to begin")
     before = _status(base, 2, state)
     assert [r["port"] for r in before] == [base, base + 1]
     recorded = json.loads(state.read_text())
