@@ -26,11 +26,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import psutil
 import zenoh
 
-from bench.bench_transport import free_port
+from bench.bench_transport import free_port, play
 from bench.common import machine, table, write_json
-from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.messages import (
     Configure,
     OkReply,
@@ -112,16 +112,6 @@ def remote_round(client: StyleClient, decisions: int, rng: np.random.Generator) 
     return decisions / (time.perf_counter() - start)
 
 
-def local_round(arena: ArenaAPI, decisions: int, rng: np.random.Generator) -> float:
-    arena.reset()
-    start = time.perf_counter()
-    for _ in range(decisions):
-        actions = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
-        if arena.step(actions)[2]:
-            arena.reset()
-    return decisions / (time.perf_counter() - start)
-
-
 def thread_cpu(pid: int) -> dict[str, float]:
     """CPU seconds so far of each thread name of ``pid`` (Linux ``/proc``)."""
     out: dict[str, float] = {}
@@ -149,6 +139,7 @@ def main() -> None:
         return
     from neuronsmae.server.arena import Arena
 
+    me = psutil.Process()
     servers, clients = {}, {}
     try:
         for style in STYLES:
@@ -163,7 +154,8 @@ def main() -> None:
         rates: dict[str, list[float]] = {"in_process": [], **{s: [] for s in STYLES}}
         cpu: dict[str, dict[str, float]] = {s: {} for s in STYLES}
         for r in range(args.rounds):
-            rates["in_process"].append(local_round(arena, args.decisions, np.random.default_rng(r)))
+            rng = np.random.default_rng(r)
+            rates["in_process"].append(play(arena, args.decisions, rng, False, [me])[0])
             for style in STYLES:
                 before = thread_cpu(servers[style].pid)
                 rng = np.random.default_rng(r)
