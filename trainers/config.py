@@ -110,6 +110,10 @@ class TrainConfig:
     lr: float = 5e-4
     """Adam learning rate (paper: 5e-4). 1e-3 reaches 0.8 against the easy bot sooner but
     stays there; 5e-4 climbs higher (docs/results.md)."""
+    lr_final: float = -1.0
+    """Learning rate at the end of the run's budget, reached linearly from ``lr`` (negative:
+    keep ``lr`` constant). The budget is whichever of ``episodes`` and ``max_minutes`` runs out
+    first, so a wall-clock run and an episode-capped run both end at ``lr_final``."""
     gamma: float = 0.99
     """Discount (paper: 0.99)."""
     eps_start: float = 0.2
@@ -206,6 +210,8 @@ class TrainConfig:
                 raise ConfigError(f"{name} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0 or self.worker_cpus <= 0:
             raise ConfigError("workers must be ≥ 0 and worker_cpus > 0")
+        if self.lr <= 0:
+            raise ConfigError(f"lr must be > 0, got {self.lr}")
         if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
             raise ConfigError("eps_start and eps_end must lie in [0, 1]")
 
@@ -217,6 +223,13 @@ class TrainConfig:
     def n_workers(self) -> int:
         """Worker count: as configured, else one per core less one for the learner."""
         return self.workers or max(1, (os.cpu_count() or 2) - 1)
+
+    def lr_at(self, progress: float) -> float:
+        """The learning rate at ``progress`` ∈ [0, 1] of the budget (see ``lr_final``)."""
+        if self.lr_final < 0:
+            return self.lr
+        frac = min(max(progress, 0.0), 1.0)
+        return self.lr + frac * (self.lr_final - self.lr)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""

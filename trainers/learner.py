@@ -210,9 +210,15 @@ class QLearner:
         return {
             "loss": float(loss.detach()),
             "grad_norm": float(grad_norm),
+            "lr": float(self.optimizer.param_groups[0]["lr"]),
             "q_taken": float((q_tot.detach() * mask).sum() / mask.sum().clamp(min=1.0)),
             "target": float((targets * mask).sum() / mask.sum().clamp(min=1.0)),
         }
+
+    def set_lr(self, lr: float) -> None:
+        """Set the optimiser's learning rate (the trainer's schedule calls this)."""
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
 
     def update_targets(self) -> None:
         """Copy the online networks into the target networks (hard update)."""

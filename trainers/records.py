@@ -25,6 +25,7 @@ TRAIN_COLUMNS = (
     "loss",
     "q_taken",
     "grad_norm",
+    "lr",
     "env_steps_per_s",
     "restarts",
 )
@@ -94,6 +95,7 @@ class Recorder:
             "train_return",
             "loss",
             "q_taken",
+            "lr",
             "env_steps_per_s",
         ):
             if row.get(key) is not None:

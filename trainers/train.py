@@ -201,6 +201,15 @@ class Trainer:
         elapsed = time.perf_counter() - self.session_start
         return self.counters.episodes < self.cfg.episodes and (limit <= 0 or elapsed < limit)
 
+    def _progress(self) -> float:
+        """Fraction of the budget spent: episodes of ``cfg.episodes`` or this session's
+        minutes of ``cfg.max_minutes``, whichever is further along."""
+        done = self.counters.episodes / self.cfg.episodes
+        limit = self.cfg.max_minutes * 60.0
+        if limit > 0:
+            done = max(done, (time.perf_counter() - self.session_start) / limit)
+        return min(done, 1.0)
+
     def _run_async(self) -> None:
         issued = self.counters.episodes
         while self._more():
@@ -236,6 +245,7 @@ class Trainer:
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
         if rounds and len(self.buffer) >= cfg.learning_starts:
+            self.learner.set_lr(cfg.lr_at(self._progress()))
             for _ in range(rounds * cfg.updates_per_round):
                 self.last_stats = self.learner.train(
                     self.buffer.sample(cfg.batch_size, self.np_rng)

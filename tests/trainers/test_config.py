@@ -93,3 +93,14 @@ def test_resume_without_a_run_is_an_error(tmp_path: Path) -> None:
     args = build_parser().parse_args(["--resume", "--out", str(tmp_path / "none")])
     with pytest.raises(ConfigError, match="--resume"):
         config_from_args(args)
+
+
+def test_learning_rate_schedule_is_linear_over_the_budget_and_off_by_default() -> None:
+    assert TrainConfig(lr=1e-3).lr_at(0.7) == 1e-3
+    cfg = TrainConfig(lr=1e-3, lr_final=1e-4)
+    assert cfg.lr_at(0.0) == pytest.approx(1e-3)
+    assert cfg.lr_at(0.5) == pytest.approx(5.5e-4)
+    assert cfg.lr_at(1.0) == pytest.approx(1e-4)
+    assert cfg.lr_at(3.0) == pytest.approx(1e-4)
+    with pytest.raises(ConfigError, match="lr must be > 0"):
+        TrainConfig(lr=0.0)

@@ -109,13 +109,17 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "eval_every": 0,
         },
         dict(kv.split("=") for kv in TINY),
-        {"learning_starts": 2},
+        {"learning_starts": 2, "lr": 1e-3, "lr_final": 1e-4},
     )
     trainer = Trainer(cfg)
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
     assert trainer.learner.updates == 2 * cfg.updates_per_round
+    # the schedule follows the episode budget: half way after 2 episodes, lr_final after 4
+    with (tmp_path / "train.csv").open() as f:
+        lrs = [float(row["lr"]) for row in csv.DictReader(f) if row["lr"]]
+    assert lrs == pytest.approx([5.5e-4, 1e-4])
 
 
 def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
