@@ -1,0 +1,46 @@
+"""bench/outcomes.py: the summary separates close races at the time limit from the rest."""
+
+from __future__ import annotations
+
+import math
+
+from bench.outcomes import summarize
+
+
+def _game(winner: str, decisions: int, hp: tuple[float, float], bullets: tuple[int, int]):
+    return {
+        "seed": 0,
+        "winner": winner,
+        "decisions": decisions,
+        "blue_hp": hp[0],
+        "red_hp": hp[1],
+        "blue_bullets": bullets[0],
+        "red_bullets": bullets[1],
+        "kills": [0, 0, 0, 0],
+    }
+
+
+def test_summary_counts_limit_bullets_and_margins_per_outcome() -> None:
+    games = [
+        _game("blue", 20, (300.0, 0.0), (100, 50)),
+        _game("blue", 50, (410.0, 400.0), (0, 0)),
+        _game("red", 50, (380.0, 420.0), (0, 0)),
+        _game("draw", 50, (460.0, 460.0), (0, 3)),
+    ]
+    won, lost = summarize(games, limit=50)
+    assert won == {
+        "outcome": "won",
+        "episodes": 2,
+        "at_time_limit": 1,
+        "both_out_of_bullets": 1,
+        "median_hp_margin": 155.0,
+        "min_hp_margin": 10.0,
+    }
+    assert lost["episodes"] == 2 and lost["at_time_limit"] == 2
+    assert lost["both_out_of_bullets"] == 1
+    assert lost["median_hp_margin"] == 20.0 and lost["min_hp_margin"] == 0.0
+
+
+def test_summary_of_no_losses_has_no_margin() -> None:
+    _, lost = summarize([_game("blue", 10, (100.0, 0.0), (5, 5))], limit=50)
+    assert lost["episodes"] == 0 and math.isnan(lost["median_hp_margin"])
