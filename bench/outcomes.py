@@ -22,10 +22,12 @@ import torch
 
 from bench.common import machine, table, write_json
 from neuronsmae.server.arena import Arena
+from neuronsmae.trainers.config import TrainConfig
 from neuronsmae.trainers.evaluate import GreedyPolicy, MatchPolicy
+from neuronsmae.trainers.train import TEST_SEED_OFFSET
 
-TEST_SEED = 1_000_000_000 + 10_000_000
-"""First seed of the trainer's test split (``eval_seed + TEST_SEED_OFFSET``)."""
+TEST_SEED = TrainConfig().eval_seed + TEST_SEED_OFFSET
+"""First seed of the trainer's test split, so the games are those its final figures count."""
 
 
 def play(policy: GreedyPolicy, arena: Arena, level: str, seed: int) -> dict[str, Any]:
