@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from neuronsmae.trainers.features import FEATURES
+from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
 from neuronsmae.trainers.mixers import ALGORITHMS
 
 LEVELS = ("easy", "middle", "hard")
@@ -139,11 +139,13 @@ class TrainConfig:
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
     features: str = "relative"
-    """Agent inputs: raw (the paper's: the observation as given) or relative (plus geometry
-    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2)."""
+    """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2) or
+    exposure (relative, plus what each candidate point offers the other enemy)."""
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
-    that scores each action from its enemy's and point's features; needs 'relative'). On the
+    that scores each action from its enemy's and point's features; needs 'relative' or
+    'exposure'). On the
     easy bot it roughly doubles the greedy win rate after 500 episodes (bench_learning)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
@@ -191,8 +193,10 @@ class TrainConfig:
         parse_resources(self.server_resources)
         _check_choice("features", self.features, sorted(FEATURES))
         _check_choice("head", self.head, ("flat", "points"))
-        if self.head == "points" and self.features != "relative":
-            raise ConfigError("head='points' needs features='relative'")
+        if self.head == "points" and self.features not in POINT_FEATURES:
+            raise ConfigError(
+                f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"
+            )
         for name in (
             "episodes",
             "batch_size",

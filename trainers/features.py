@@ -14,6 +14,15 @@ a laptop's half hour (see ``bench/bench_learning.py``).
 Layout read (``docs/options.md``; every value in [-1, 1]): poses (x, y, yaw) of self, ally,
 enemy 0, enemy 1 at [0:12]; 4 candidate points (x, y) per enemy at [12:28]; time [28]; HP
 [29:33]; bullets [33:37].
+
+``exposure`` adds, for every candidate point, what standing there offers the *other* enemy
+(the one the action does not target): how far it is (the hit factor falls from 1.0 below
+3 m to 0.5 and 0.2), which of my plates it would see once my chassis has turned toward my
+target (side and rear plates take 2× and 3× damage), and whether the point lies in that
+enemy's firing cone as it now faces. ``relative`` describes a point only against its own
+enemy, so a point that is ideal against one robot but hands the other a rear plate looked
+as good as any; games against the easy bot are lost as close races on HP at the time limit
+(``python -m bench.outcomes``), which is where those plates count.
 """
 
 from __future__ import annotations
@@ -77,17 +86,46 @@ def relative(obs: np.ndarray) -> np.ndarray:
     return np.concatenate(cols, axis=-1).astype(np.float32)
 
 
+EXPOSURE_PER_POINT = 5
+"""``exposure`` columns per candidate point: distance to the other enemy, the other enemy's
+bearing from the point relative to the heading toward the target (cos, sin), and the point's
+bearing from the other enemy relative to its heading (cos, sin)."""
+RELATIVE_DIM = LAYOUT_37 + N_ENEMY * (6 + 4 * K)
+"""Width of the ``relative`` features (81)."""
+
+
+def exposure(obs: np.ndarray) -> np.ndarray:
+    """``obs [..., 37]`` → ``[..., 81 + 40]``: ``relative``, then 5 columns per point.
+
+    Point ``k`` of enemy ``j`` (action ``4j + k``) fills columns ``81 + 5(4j + k)`` onward.
+    """
+    out = [relative(obs)]
+    for j in range(N_ENEMY):
+        target = _xy(obs, 6 + 3 * j)
+        other, other_yaw = _xy(obs, 6 + 3 * (1 - j)), obs[..., 8 + 3 * (1 - j)] * np.pi
+        for k in range(K):
+            point = _xy(obs, 12 + 2 * (K * j + k))
+            to_target, to_other = target - point, other - point
+            heading = np.arctan2(to_target[..., 1], to_target[..., 0])
+            out += [np.linalg.norm(to_other, axis=-1)[..., None] / SCALE]
+            seen = np.arctan2(to_other[..., 1], to_other[..., 0]) - heading
+            cone = np.arctan2(-to_other[..., 1], -to_other[..., 0]) - other_yaw
+            out += [np.stack([*_angle_feats(seen), *_angle_feats(cone)], -1)]
+    return np.concatenate(out, axis=-1).astype(np.float32)
+
+
 def action_feature_index(features: str, n_actions: int) -> np.ndarray:
-    """Columns of the ``relative`` features that describe each abstract action: ``[8, 17]``.
+    """Columns of the features that describe each abstract action: ``[8, 17]`` or ``[8, 22]``.
 
     Action ``a`` drives to point ``a % 4`` of enemy ``a // 4``; its row lists that point's
     (x, y), the enemy's pose, HP and bullets, the enemy's 6 relative features and the
-    point's 4. The ``points`` Q head scores every action from its row.
+    point's 4, then with ``exposure`` the point's 5 exposure columns. The ``points`` Q head
+    scores every action from its row.
     """
-    if features != "relative" or n_actions != N_ENEMY * K:
+    if features not in POINT_FEATURES or n_actions != N_ENEMY * K:
         raise UnknownFeaturesError(
-            f"the 'points' head needs features='relative' and {N_ENEMY * K} abstract actions, "
-            f"got features={features!r}, n_actions={n_actions}"
+            f"the 'points' head needs features in {POINT_FEATURES} and {N_ENEMY * K} abstract "
+            f"actions, got features={features!r}, n_actions={n_actions}"
         )
     rows = []
     for a in range(n_actions):
@@ -106,6 +144,9 @@ def action_feature_index(features: str, n_actions: int) -> np.ndarray:
                 *range(base + 6 + 4 * k, base + 10 + 4 * k),
             ]
         )
+        if features == "exposure":
+            start = RELATIVE_DIM + EXPOSURE_PER_POINT * a
+            rows[-1] += range(start, start + EXPOSURE_PER_POINT)
     return np.asarray(rows, np.int64)
 
 
@@ -114,8 +155,14 @@ def raw(obs: np.ndarray) -> np.ndarray:
     return np.asarray(obs, np.float32)
 
 
-FEATURES: dict[str, Callable[[np.ndarray], np.ndarray]] = {"raw": raw, "relative": relative}
+FEATURES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "raw": raw,
+    "relative": relative,
+    "exposure": exposure,
+}
 """Feature sets by name."""
+POINT_FEATURES = ("relative", "exposure")
+"""Feature sets that describe each abstract action, as the ``points`` head needs."""
 
 
 def get_features(name: str) -> Callable[[np.ndarray], np.ndarray]:

@@ -8,7 +8,9 @@ import torch
 
 from neuronsmae.trainers.features import (
     UnknownFeaturesError,
+    RELATIVE_DIM,
     action_feature_index,
+    exposure,
     feature_dim,
     get_features,
     relative,
@@ -42,9 +44,28 @@ def test_relative_geometry_by_hand() -> None:
     assert cos_side == pytest.approx(-1.0, abs=1e-5)  # the point faces its rear plate
 
 
+def test_exposure_describes_what_each_point_offers_the_other_enemy() -> None:
+    # Target enemy 0 at (4, 1); its point 0 at (1.5, 1), so standing there I face +x.
+    # Enemy 1 at (1.5, 3) facing -y: 2 m to my left (my side plate), and I am dead ahead
+    # of it (inside its cone).
+    o = _obs((1.0, 1.0, 0.0), (4.0, 1.0, 0.0), (1.5, 1.0))
+    o[9:12] = [(1.5 - 4.04) / 4.04, (3.0 - 2.24) / 2.24, -0.5]
+    f = exposure(o[None])[0]
+    assert f.shape == (121,) and np.array_equal(f[:RELATIVE_DIM], relative(o[None])[0])
+    d_other, cos_seen, sin_seen, cos_cone, sin_cone = f[RELATIVE_DIM : RELATIVE_DIM + 5]
+    assert d_other == pytest.approx(2.0 / 8.0, abs=1e-5)
+    assert (cos_seen, sin_seen) == pytest.approx((0.0, 1.0), abs=1e-5)  # on my left
+    assert (cos_cone, sin_cone) == pytest.approx((1.0, 0.0), abs=1e-5)  # in its cone
+    # Action 0's row of the points head ends with exactly these five columns.
+    row = action_feature_index("exposure", 8)[0]
+    assert list(row[-5:]) == list(range(RELATIVE_DIM, RELATIVE_DIM + 5))
+    assert list(row[:-5]) == list(action_feature_index("relative", 8)[0])
+
+
 def test_registry_and_layout_errors() -> None:
     assert feature_dim("raw", 21) == 21 and feature_dim("relative", 37) == 81
-    with pytest.raises(UnknownFeaturesError, match="valid: raw, relative"):
+    assert feature_dim("exposure", 37) == 121
+    with pytest.raises(UnknownFeaturesError, match="valid: exposure, raw, relative"):
         get_features("polar")
     with pytest.raises(UnknownFeaturesError, match="37-value"):
         relative(np.zeros((2, 21), np.float32))
