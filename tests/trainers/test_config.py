@@ -42,6 +42,7 @@ def test_set_overrides_are_typed() -> None:
     )
     assert cfg.lr == 1e-3 and cfg.batch_size == 8 and cfg.double_q is False
     assert cfg.alg == "qmix" and cfg.episodes == 1000
+    assert make_config(parse_overrides(["features=exposure"])).head == "points"
 
 
 @pytest.mark.parametrize(
@@ -54,6 +55,8 @@ def test_set_overrides_are_typed() -> None:
         (["alg=mappo"], "valid: iql, qmix, vdn"),
         (["level=expert"], "valid: easy, middle, hard"),
         (["batch_size=0"], "batch_size must be"),
+        (["features=polar"], "valid: exposure, raw, relative"),
+        (["features=raw"], "head='points' needs features in .*'relative', 'exposure'"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
