@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from neuronsmae.trainers.features import (
-    UnknownFeaturesError,
     RELATIVE_DIM,
+    UnknownFeaturesError,
     action_feature_index,
     exposure,
     feature_dim,
