@@ -31,7 +31,11 @@ REPO = Path(__file__).resolve().parents[2]
 WIRE_PACKAGES = ("protocol", "server", "client")
 """Every package whose code reads bytes from the network."""
 QUICK_S = 0.05
-"""A refused hostile payload costs the server at most this long (seconds)."""
+"""A refused hostile payload costs the server at most this much CPU (seconds).
+
+Bounds here are on the decoding thread's CPU time (``time.thread_time``), not wall time: the
+machines are shared, and a wall-clock bound fails whenever another job takes the core, which
+says nothing about the decoder. CPU time is what an attacker's payload costs the server."""
 
 
 def _step(actions: Any) -> bytes:
@@ -75,10 +79,10 @@ HOSTILE: dict[str, tuple[bytes, type[Exception]]] = {
 @pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
 def test_hostile_payload_is_refused_quickly(case: str, capsys: pytest.CaptureFixture) -> None:
     payload, error = HOSTILE[case]
-    t0 = time.perf_counter()
+    t0 = time.thread_time()
     with pytest.raises(error):
         decode_request(payload)
-    assert time.perf_counter() - t0 < QUICK_S
+    assert time.thread_time() - t0 < QUICK_S
     assert "unpickled" not in capsys.readouterr().out
 
 
@@ -95,9 +99,9 @@ def test_worst_case_payloads_under_the_limit_decode_in_bounded_time(case: str) -
     then refused by the arena's own checks, as wrong actions)."""
     payload = BULKY[case]
     assert len(payload) <= MAX_REQUEST_BYTES
-    t0 = time.perf_counter()
+    t0 = time.thread_time()
     decode_request(payload)
-    assert time.perf_counter() - t0 < 2.0
+    assert time.thread_time() - t0 < 2.0
 
 
 def test_every_length_the_decoder_may_allocate_is_capped() -> None:
