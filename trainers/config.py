@@ -146,8 +146,8 @@ class TrainConfig:
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
     that scores each action from its enemy's and point's features; needs 'relative' or
-    'exposure'). On the
-    easy bot it roughly doubles the greedy win rate after 500 episodes (bench_learning)."""
+    'exposure'). On the easy bot it roughly doubles the greedy win rate after 500 episodes
+    (bench_learning)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
