@@ -23,8 +23,8 @@ enemy's firing cone as it now faces. ``relative`` describes a point only against
 enemy, so a point that is ideal against one robot but hands the other a rear plate looked
 as good as any; games against the easy bot are lost as close races on HP at the time limit
 (``python -m bench.outcomes``), which is where those plates count. Measured against the
-easy bot it does not lift the 30-minute plateau (0.865 and 0.81 on two seeds against 0.845
-and 0.855 for ``relative``; docs/results.md, runs K and L), so it is not the default.
+easy bot it does not lift the 30-minute plateau (0.865 and 0.81 on two seeds against 0.845,
+0.855 and 0.815 for ``relative``; docs/results.md, runs K, L and D, J, N), so it is not the default.
 """
 
 from __future__ import annotations
