@@ -92,7 +92,9 @@ EXPOSURE_PER_POINT = 5
 """``exposure`` columns per candidate point: distance to the other enemy, the other enemy's
 bearing from the point relative to the heading toward the target (cos, sin), and the point's
 bearing from the other enemy relative to its heading (cos, sin)."""
-RELATIVE_DIM = LAYOUT_37 + N_ENEMY * (6 + 4 * K)
+RELATIVE_PER_ENEMY = 6 + 4 * K
+"""``relative`` columns per enemy: its 6, then 4 for each of its candidate points."""
+RELATIVE_DIM = LAYOUT_37 + N_ENEMY * RELATIVE_PER_ENEMY
 """Width of the ``relative`` features (81)."""
 
 
@@ -132,7 +134,7 @@ def action_feature_index(features: str, n_actions: int) -> np.ndarray:
     rows = []
     for a in range(n_actions):
         j, k = divmod(a, K)
-        base = LAYOUT_37 + 22 * j
+        base = LAYOUT_37 + RELATIVE_PER_ENEMY * j
         rows.append(
             [
                 12 + 2 * (K * j + k),
