@@ -26,6 +26,7 @@ from typing import Any
 
 from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
 from neuronsmae.trainers.mixers import ALGORITHMS
+from neuronsmae.trainers.symmetry import parse_generators
 
 LEVELS = ("easy", "middle", "hard")
 """Opponent bot levels of the cooperative task."""
@@ -148,6 +149,11 @@ class TrainConfig:
     that scores each action from its enemy's and point's features; needs 'relative' or
     'exposure'). On the easy bot it roughly doubles the greedy win rate after 500 episodes
     (bench_learning)."""
+    augment: str = "none"
+    """Replay each sampled episode under a random symmetry of the task, so the learner sees
+    every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
+    enemy slots), field (turn the scene half a turn about the field's centre) and allies
+    (swap the agents). Abstract 2 v 2 only; see trainers/symmetry.py."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
@@ -198,6 +204,10 @@ class TrainConfig:
             raise ConfigError(
                 f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"
             )
+        try:
+            parse_generators(self.augment)
+        except ValueError as err:
+            raise ConfigError(str(err)) from None
         for name in (
             "episodes",
             "batch_size",

@@ -49,6 +49,7 @@ from neuronsmae.trainers.placement import sampler_placement
 from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy
 from neuronsmae.trainers.sampler import Request, Sampler
+from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
 
 TEST_SEED_OFFSET = 10_000_000
 """Test seeds start this far above ``eval_seed``, clear of any validation seed."""
@@ -138,6 +139,14 @@ class Trainer:
             mixer_embed=cfg.mixer_embed,
             hypernet_hidden=cfg.hypernet_hidden,
             td_lambda=cfg.td_lambda,
+        )
+        self.group = task_group(
+            parse_generators(cfg.augment),
+            cfg.features,
+            self.env.obs_dim,
+            self.env.state_dim,
+            self.env.n_actions,
+            self.env.n_agents,
         )
         self.buffer = EpisodeReplayBuffer(
             cfg.buffer_size,
@@ -247,9 +256,8 @@ class Trainer:
         if rounds and len(self.buffer) >= cfg.learning_starts:
             self.learner.set_lr(cfg.lr_at(self._progress()))
             for _ in range(rounds * cfg.updates_per_round):
-                self.last_stats = self.learner.train(
-                    self.buffer.sample(cfg.batch_size, self.np_rng)
-                )
+                batch = self.buffer.sample(cfg.batch_size, self.np_rng)
+                self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
         self.recorder.advance(c.episodes - before)

@@ -109,9 +109,11 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "eval_every": 0,
         },
         dict(kv.split("=") for kv in TINY),
-        {"learning_starts": 2, "lr": 1e-3, "lr_final": 1e-4},
+        # augment rides along: its updates must run inside the real loop
+        {"learning_starts": 2, "lr": 1e-3, "lr_final": 1e-4, "augment": "enemies,field,allies"},
     )
     trainer = Trainer(cfg)
+    assert len(trainer.group) == 8
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
