@@ -3,14 +3,15 @@
 Three relabellings leave the cooperative task unchanged, so a stored episode stays a
 valid episode after any of them:
 
-* ``enemies`` swaps the two enemy slots. The bots treat robots by position, not by index,
-  so the enemy called 0 could as well have been called 1; actions ``4j + k`` become
-  ``4(1 − j) + k``.
+* ``enemies`` swaps the two enemy slots. The bots choose by position (nearest robot,
+  nearest point), not by index, so the enemy called 0 could as well have been called 1
+  (up to ties); actions ``4j + k`` become ``4(1 − j) + k``.
 * ``field`` turns the whole scene half a turn about the field's centre. The layout is
-  centrally symmetric (reference.md, "Arena"), and so are the spawns to within 12 cm, the
-  physics and the bots: every position ``(x, y)`` becomes ``(−x, −y)`` in the normalised
-  frame and every yaw gains π. The ``relative`` and ``exposure`` features are built from
-  differences of positions and of angles, so they do not change at all.
+  centrally symmetric (reference.md, "Arena"; the obstacles to within 2 cm, the spawn
+  ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
+  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative`` and
+  ``exposure`` features are built from differences of positions and of angles, so they do
+  not change at all.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.
