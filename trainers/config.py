@@ -149,11 +149,13 @@ class TrainConfig:
     that scores each action from its enemy's and point's features; needs 'relative' or
     'exposure'). On the easy bot it roughly doubles the greedy win rate after 500 episodes
     (bench_learning)."""
-    augment: str = "none"
+    augment: str = "enemies,field,allies"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
     every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
     enemy slots), field (turn the scene half a turn about the field's centre) and allies
-    (swap the agents). Abstract 2 v 2 only; see trainers/symmetry.py."""
+    (swap the agents); see trainers/symmetry.py. Against the easy bot all three reach the
+    0.85 plateau in about half the episodes (0.74-0.86 after 1,000 against 0.625-0.78
+    without), but not higher (docs/results.md, runs P-R)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
@@ -258,6 +260,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "target_update_interval": 5,
         "features": "raw",
         "head": "flat",
+        "augment": "none",
         "sync": True,
         "train_every": 1,
         "updates_per_round": 1,
@@ -268,9 +271,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 """Named layers applied before the config file: ``paper`` restores the paper's settings
 (synchronous loop of one episode per worker and one update per iteration, Adam 5e-4,
-one-step targets, targets refreshed every 5 iterations, raw observations, flat Q head) where
-the defaults were tuned to learn within a laptop's half hour; 30 000 episodes is the paper's
-20 workers × 1501 iterations (run it with ``--workers 20`` to match)."""
+one-step targets, targets refreshed every 5 iterations, raw observations, flat Q head, no
+augmentation) where the defaults were tuned to learn within a laptop's half hour; 30 000
+episodes is the paper's 20 workers × 1501 iterations (run it with ``--workers 20`` to
+match)."""
 
 
 def preset(name: str) -> dict[str, Any]:

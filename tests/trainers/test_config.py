@@ -24,6 +24,7 @@ def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
     assert (cfg.lr, cfg.gamma, cfg.eps_start, cfg.eps_end) == (5e-4, 0.99, 0.2, 0.05)
     assert (cfg.grad_clip, cfg.agent_hidden, cfg.mixer_embed) == (10.0, 128, 32)
     assert (cfg.target_update_interval, cfg.td_lambda, cfg.features) == (5, 0.0, "raw")
+    assert cfg.augment == "none" and make_config().augment == "enemies,field,allies"
     args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
     assert config_from_args(args).lr == 0.01  # --set still wins over the preset
     with pytest.raises(ConfigError, match="valid: paper"):
