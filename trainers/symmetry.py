@@ -125,12 +125,13 @@ def _enemies(obs_dim: int) -> Symmetry:
         block = EXPOSURE_PER_POINT * K
         pairs.append((RELATIVE_DIM, RELATIVE_DIM + block, block))
     state = _swap(STATE_DIM, [(5 * N_AGENTS, 5 * (N_AGENTS + 1), 5)])
-    obs = ColumnMap(
-        _swap(obs_dim, pairs), torch.ones(obs_dim), torch.zeros(obs_dim, dtype=torch.bool)
+    return Symmetry(
+        "enemies",
+        replace(ColumnMap.identity(obs_dim), index=_swap(obs_dim, pairs)),
+        replace(ColumnMap.identity(STATE_DIM), index=state),
+        (torch.arange(N_ACTIONS) + K) % N_ACTIONS,
+        torch.arange(N_AGENTS),
     )
-    state_map = replace(ColumnMap.identity(STATE_DIM), index=state)
-    actions = (torch.arange(N_ACTIONS) + K) % N_ACTIONS
-    return Symmetry("enemies", obs, state_map, actions, torch.arange(N_AGENTS))
 
 
 def _field(obs_dim: int) -> Symmetry:
@@ -184,9 +185,9 @@ def task_group(
 ) -> list[Symmetry]:
     """Every element of the group the named generators span, identity first.
 
-    No generators give the identity alone, for any task.
-    ``obs_dim`` is the width *after* the feature set. Raises :class:`UnknownFeaturesError`
-    if the task is not the abstract 2 v 2 whose layouts the transforms know.
+    ``obs_dim`` is the width *after* the feature set. No generators give the identity
+    alone, for any task; otherwise raises :class:`UnknownFeaturesError` if the task is not
+    the abstract 2 v 2 whose layouts the transforms know.
     """
     base = Symmetry(
         "identity",
@@ -217,6 +218,10 @@ def task_group(
     return group
 
 
+_EPISODE_FIELDS = ("obs", "state", "avail", "alive", "actions", "last_actions")
+"""The batch fields a symmetry changes (rewards, terminations and padding it does not)."""
+
+
 def transform(batch: Batch, g: Symmetry) -> Batch:
     """``batch`` as it reads after the symmetry ``g`` (every episode alike)."""
     agents, relabel = g.agents, g.actions
@@ -239,27 +244,12 @@ def augment(batch: Batch, group: Sequence[Symmetry], rng: np.random.Generator) -
     if len(group) <= 1:
         return batch
     pick = torch.from_numpy(rng.integers(len(group), size=batch.obs.shape[0]))
-    out = batch
+    fields = {f: getattr(batch, f).clone() for f in _EPISODE_FIELDS}
     for i, g in enumerate(group[1:], start=1):
         rows = pick == i
-        if not bool(rows.any()):
-            continue
-        moved = transform(_rows(batch, rows), g)
-        out = _assign(out, rows, moved)
-    return out
-
-
-_EPISODE_FIELDS = ("obs", "state", "avail", "alive", "actions", "last_actions")
-
-
-def _rows(batch: Batch, rows: torch.Tensor) -> Batch:
-    return replace(batch, **{f: getattr(batch, f)[rows] for f in _EPISODE_FIELDS})
-
-
-def _assign(batch: Batch, rows: torch.Tensor, part: Batch) -> Batch:
-    fields = {}
-    for f in _EPISODE_FIELDS:
-        whole = getattr(batch, f).clone()
-        whole[rows] = getattr(part, f)
-        fields[f] = whole
+        if bool(rows.any()):
+            part = replace(batch, **{f: getattr(batch, f)[rows] for f in _EPISODE_FIELDS})
+            moved = transform(part, g)
+            for f in _EPISODE_FIELDS:
+                fields[f][rows] = getattr(moved, f)
     return replace(batch, **fields)

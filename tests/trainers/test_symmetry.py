@@ -128,6 +128,10 @@ def test_augment_draws_per_episode_and_none_is_free(raw_buffer: EpisodeReplayBuf
     out = augment(big, group, np.random.default_rng(6))
     swapped = (out.actions != big.actions).flatten(1).any(1)
     assert 0 < int(swapped.sum()) < 64  # some episodes swapped, some kept
+    every = transform(big, group[1])
+    for f in ("obs", "state", "avail", "actions", "last_actions"):
+        torch.testing.assert_close(getattr(out, f)[swapped], getattr(every, f)[swapped])
+        torch.testing.assert_close(getattr(out, f)[~swapped], getattr(big, f)[~swapped])
     torch.testing.assert_close(out.rewards, big.rewards)
 
 
