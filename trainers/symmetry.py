@@ -42,7 +42,6 @@ from neuronsmae.trainers.features import (
     LAYOUT_37,
     RELATIVE_DIM,
     RELATIVE_PER_ENEMY,
-    UnknownFeaturesError,
     feature_dim,
 )
 
@@ -51,6 +50,10 @@ N_ACTIONS = N_ENEMY * K
 STATE_DIM = 5 * (N_AGENTS + N_ENEMY) + 1
 GENERATORS = ("enemies", "field", "allies")
 """Names of the symmetries :func:`task_group` can combine."""
+
+
+class UnknownSymmetryError(ValueError):
+    """An unknown symmetry name, or a task whose layouts the symmetries do not know."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +171,7 @@ def parse_generators(text: str) -> tuple[str, ...]:
     names = tuple(p.strip() for p in text.split(",") if p.strip() and p.strip() != "none")
     unknown = [n for n in names if n not in _BUILDERS]
     if unknown or len(set(names)) != len(names):
-        raise UnknownFeaturesError(
+        raise UnknownSymmetryError(
             f"augment must be 'none' or a comma list of distinct names from "
             f"{', '.join(GENERATORS)}; got {text!r}"
         )
@@ -186,7 +189,7 @@ def task_group(
     """Every element of the group the named generators span, identity first.
 
     ``obs_dim`` is the width *after* the feature set. No generators give the identity
-    alone, for any task; otherwise raises :class:`UnknownFeaturesError` if the task is not
+    alone, for any task; otherwise raises :class:`UnknownSymmetryError` if the task is not
     the abstract 2 v 2 whose layouts the transforms know.
     """
     base = Symmetry(
@@ -200,7 +203,7 @@ def task_group(
         return [base]
     expected = feature_dim(features, LAYOUT_37)
     if (obs_dim, state_dim, n_actions, n_agents) != (expected, STATE_DIM, N_ACTIONS, N_AGENTS):
-        raise UnknownFeaturesError(
+        raise UnknownSymmetryError(
             f"augment knows the abstract 2 v 2 layouts only (obs {expected} with features "
             f"{features!r}, state {STATE_DIM}, {N_ACTIONS} actions, {N_AGENTS} agents); got obs "
             f"{obs_dim}, state {state_dim}, {n_actions} actions, {n_agents} agents. "

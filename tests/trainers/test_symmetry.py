@@ -9,11 +9,12 @@ import torch
 from neuronsmae.server.sim.field import FIELD_X, FIELD_Y, OBSTACLES
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.config import ConfigError, TrainConfig
-from neuronsmae.trainers.features import UnknownFeaturesError, feature_dim, get_features
+from neuronsmae.trainers.features import feature_dim, get_features
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 from neuronsmae.trainers.symmetry import (
     GENERATORS,
+    UnknownSymmetryError,
     augment,
     parse_generators,
     task_group,
@@ -140,13 +141,13 @@ def test_errors_name_the_valid_choices() -> None:
         "enemies",
         "field",
     )
-    with pytest.raises(UnknownFeaturesError, match="enemies, field, allies"):
+    with pytest.raises(UnknownSymmetryError, match="enemies, field, allies"):
         parse_generators("mirror")
-    with pytest.raises(UnknownFeaturesError, match="distinct"):
+    with pytest.raises(UnknownSymmetryError, match="distinct"):
         parse_generators("field,field")
     with pytest.raises(ConfigError, match="augment"):
         TrainConfig(augment="enemy")
-    with pytest.raises(UnknownFeaturesError, match="abstract 2 v 2"):
+    with pytest.raises(UnknownSymmetryError, match="abstract 2 v 2"):
         task_group(("field",), "raw", 21, 21, 10, 2)  # the discrete layout
     assert GENERATORS == ALL
     assert len(task_group((), "raw", 99, 3, 5, 7)) == 1  # no generators: any task
