@@ -42,6 +42,12 @@ class Counters:
     """Rollout-worker restarts over all sessions."""
 
 
+def policy_key(learner_state: dict[str, Any]) -> str:
+    """Which entry of a saved learner state is the policy a match or evaluation plays: the
+    weight average when the run kept one (``eval_ema``), else the latest agent."""
+    return "average_agent" if "average_agent" in learner_state else "agent"
+
+
 def checkpoint_path(path: str | os.PathLike[str]) -> Path:
     """A checkpoint file from either its own path or its run directory."""
     p = Path(path)
@@ -61,7 +67,8 @@ def save_checkpoint(
 ) -> None:
     """Write the checkpoint atomically (temporary file, then rename).
 
-    ``learner_state`` is ``QLearner.state_dict()``: its ``agent`` entry is what acting needs.
+    ``learner_state`` is ``QLearner.state_dict()``: its :func:`policy_key` entry is what
+    acting needs.
     ``selection`` is the evaluation that chose these weights (for ``best.pt``).
     """
     payload = {

@@ -139,6 +139,13 @@ class TrainConfig:
     """λ of the TD(λ) targets (0: the paper's one-step targets; 0.6 as in PyMARL2)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
+    eval_ema: float = 0.0
+    """Rate τ of an exponential moving average of the agent's weights, taken after every
+    gradient step (average += τ·(weights − average)); 0 turns it off. When on, the average
+    is the policy that evaluations measure, ``best.pt`` keeps and checkpoints give to the
+    match command, while sampling keeps acting with the latest weights. Why: past the
+    plateau the latest weights wander between policies of equal quality that lose
+    different games, and averaging them behaves like an ensemble of the recent ones."""
     features: str = "relative"
     """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
     derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2) or
@@ -231,6 +238,8 @@ class TrainConfig:
             raise ConfigError(f"lr must be > 0, got {self.lr}")
         if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
             raise ConfigError("eps_start and eps_end must lie in [0, 1]")
+        if not 0.0 <= self.eval_ema < 1.0:
+            raise ConfigError(f"eval_ema must lie in [0, 1) (0 = off), got {self.eval_ema}")
 
     @property
     def run_dir(self) -> Path:

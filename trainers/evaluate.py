@@ -17,7 +17,7 @@ import torch
 
 from neuronsmae.trainers.agent import build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Episode
-from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint
+from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_key
 from neuronsmae.trainers.config import LEVELS
 from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
@@ -45,7 +45,8 @@ def load_policy(path: str | os.PathLike[str]) -> Policy:
     """The acting part of a checkpoint (file or run directory): architecture and weights."""
     payload = load_checkpoint(path)
     spec = AgentSpec(**payload["agent_spec"])
-    weights = {k: v.numpy() for k, v in payload["learner"]["agent"].items()}
+    learner = payload["learner"]
+    weights = {k: v.numpy() for k, v in learner[policy_key(learner)].items()}
     return Policy(spec, weights)
 
 

@@ -160,6 +160,7 @@ class QLearner:
         mixer_embed: int,
         hypernet_hidden: int,
         td_lambda: float = 0.0,
+        eval_ema: float = 0.0,
     ) -> None:
         self.env, self.spec, self.mixer_name = env, spec, mixer
         self.td_lambda = td_lambda
@@ -172,6 +173,9 @@ class QLearner:
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
+        self.eval_ema = eval_ema
+        self.average_agent = copy.deepcopy(self.agent) if eval_ema > 0 else None
+        """Exponential moving average of the agent (``eval_ema`` > 0): the evaluated policy."""
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""
@@ -204,6 +208,7 @@ class QLearner:
         loss.backward()
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
         self.optimizer.step()
+        self._update_average()
         self.updates += 1
         if self.updates % self.target_update_interval == 0:
             self.update_targets()
@@ -220,18 +225,30 @@ class QLearner:
         for group in self.optimizer.param_groups:
             group["lr"] = lr
 
+    @torch.no_grad()
+    def _update_average(self) -> None:
+        if self.average_agent is None:
+            return
+        for avg, new in zip(self.average_agent.parameters(), self.agent.parameters(), strict=True):
+            avg.lerp_(new, self.eval_ema)
+
     def update_targets(self) -> None:
         """Copy the online networks into the target networks (hard update)."""
         self.target_agent.load_state_dict(self.agent.state_dict())
         self.target_mixer.load_state_dict(self.mixer.state_dict())
 
     def acting_weights(self) -> dict[str, np.ndarray]:
-        """The agent's weights as NumPy arrays: what workers need, cheap to ship by Ray."""
-        return {k: v.detach().cpu().numpy().copy() for k, v in self.agent.state_dict().items()}
+        """The latest weights, which sampling acts with (NumPy arrays, cheap to ship)."""
+        return _numpy_weights(self.agent)
+
+    def policy_weights(self) -> dict[str, np.ndarray]:
+        """The weights evaluations measure: the average with ``eval_ema``, else the latest."""
+        average = self.average_agent
+        return _numpy_weights(self.agent if average is None else average)
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to resume learning exactly (networks, targets, optimiser)."""
-        return {
+        state = {
             "agent": self.agent.state_dict(),
             "mixer": self.mixer.state_dict(),
             "target_agent": self.target_agent.state_dict(),
@@ -239,6 +256,9 @@ class QLearner:
             "optimizer": self.optimizer.state_dict(),
             "updates": self.updates,
         }
+        if self.average_agent is not None:
+            state["average_agent"] = self.average_agent.state_dict()
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved."""
@@ -248,3 +268,10 @@ class QLearner:
         self.target_mixer.load_state_dict(state["target_mixer"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
+        if self.average_agent is not None:  # a run that turns eval_ema on starts it afresh
+            self.average_agent.load_state_dict(state.get("average_agent", state["agent"]))
+
+
+def _numpy_weights(agent: nn.Module) -> dict[str, np.ndarray]:
+    """An agent's weights as NumPy arrays: what workers need, cheap to ship by Ray."""
+    return {k: v.detach().cpu().numpy().copy() for k, v in agent.state_dict().items()}

@@ -37,6 +37,7 @@ from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
     Counters,
     load_checkpoint,
+    policy_key,
     restore_rng,
     save_checkpoint,
 )
@@ -139,6 +140,7 @@ class Trainer:
             mixer_embed=cfg.mixer_embed,
             hypernet_hidden=cfg.hypernet_hidden,
             td_lambda=cfg.td_lambda,
+            eval_ema=cfg.eval_ema,
         )
         self.group = task_group(
             parse_generators(cfg.augment),
@@ -165,7 +167,8 @@ class Trainer:
         best = self.run_dir / BEST_NAME
         if self.cfg.keep_best and best.is_file():
             chosen = load_checkpoint(best)
-            weights = {k: v.numpy() for k, v in chosen["learner"]["agent"].items()}
+            kept = chosen["learner"]
+            weights = {k: v.numpy() for k, v in kept[policy_key(kept)].items()}
             self.best = (weights, chosen["selection"])
         log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
 
@@ -299,26 +302,35 @@ class Trainer:
         }
 
     def evaluate(
-        self, episodes: int | None = None, split: str = "validation", weights: str = "latest"
+        self,
+        episodes: int | None = None,
+        split: str = "validation",
+        weights: str = "latest",
+        policy: Policy | None = None,
     ) -> dict[str, Any]:
-        """Greedy win rate of the broadcast weights on held-out seeds; recorded and returned.
+        """Greedy win rate of ``policy`` (default: the learner's evaluated weights, see
+        ``eval_ema``) on held-out seeds; recorded and returned.
 
         ``split`` picks the seeds (``validation`` or ``test``, see the module docstring);
         with ``keep_best``, a validation result better than every earlier one keeps the
-        weights that earned it.
+        weights that earned it. Training requests queued afterwards act with the latest
+        weights again; those already in flight keep the weights they were sent with.
         """
         cfg, c = self.cfg, self.counters
         n = episodes or cfg.eval_episodes
         first = cfg.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
+        evaluated = policy or Policy(self.spec, self.learner.policy_weights())
+        self.sampler.broadcast(evaluated)
         requests = [Request(first + k, 0.0, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
+        self.sampler.broadcast(self._policy())
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         row = {**asdict(c), **figures, "split": split, "weights": weights}
         self.recorder.eval(row)
         self.evals.append(row)
         better = self.best is None or row["win_rate"] > self.best[1]["win_rate"]
         if split == "validation" and cfg.keep_best and better:
-            self.best = (self.learner.acting_weights(), row)
+            self.best = (evaluated.weights, row)
             self._save_best()
         return row
 
@@ -327,7 +339,7 @@ class Trainer:
         (the learner's other state is the current one: resume from checkpoint.pt)."""
         assert self.best is not None
         state = self.learner.state_dict()
-        state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
+        state[policy_key(state)] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
         save_checkpoint(
             self.run_dir / BEST_NAME,
             config=self.cfg.to_dict(),
@@ -344,8 +356,8 @@ class Trainer:
         if self.best is None:
             return None
         weights, chosen = self.best
-        self.sampler.broadcast(Policy(self.spec, weights))
-        row = self.evaluate(self.cfg.final_eval_episodes, split="test", weights="best")
+        best = Policy(self.spec, weights)
+        row = self.evaluate(self.cfg.final_eval_episodes, split="test", weights="best", policy=best)
         return {**row, "chosen_at_episodes": chosen["episodes"], "validation": chosen}
 
     def checkpoint(self) -> None:

@@ -97,3 +97,29 @@ def test_lambda_returns_by_hand() -> None:
     g1 = 2 + g * ((1 - lam) * 20 + lam * g2)
     g0 = 1 + g * ((1 - lam) * 10 + lam * g1)
     assert lambda_returns(r, d, v, g, lam).flatten().tolist() == pytest.approx([g0, g1, g2])
+
+
+def test_weight_average_follows_every_update_and_is_the_evaluated_policy() -> None:
+    rng = np.random.default_rng(3)
+    buf = EpisodeReplayBuffer(8, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(8):
+        buf.add(make_episode(LIMIT, rng, dead_from=None))
+    torch.manual_seed(0)
+    learner = _learner("vdn", eval_ema=0.25)
+    average = learner.policy_weights()
+    for _ in range(3):
+        learner.train(buf.sample(4, rng))
+        latest = learner.acting_weights()
+        average = {k: v + 0.25 * (latest[k] - v) for k, v in average.items()}
+        got = learner.policy_weights()
+        for k, v in average.items():
+            np.testing.assert_allclose(got[k], v, rtol=1e-5, atol=1e-6)
+    assert not np.array_equal(got["fc1.weight"], latest["fc1.weight"])
+    resumed = _learner("vdn", eval_ema=0.25)
+    resumed.load_state_dict(learner.state_dict())
+    for k, v in resumed.policy_weights().items():
+        assert np.array_equal(v, got[k])
+    off = _learner("vdn")
+    assert off.average_agent is None and "average_agent" not in off.state_dict()
+    for k, v in off.policy_weights().items():
+        assert np.array_equal(v, off.acting_weights()[k])

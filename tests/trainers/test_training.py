@@ -20,7 +20,7 @@ import torch
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import make_config
-from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint
+from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
 from neuronsmae.trainers.sampler import Request
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
@@ -124,21 +124,32 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     assert lrs == pytest.approx([5.5e-4, 1e-4])
 
 
+@pytest.mark.parametrize("eval_ema", [0.0, 0.5])
 def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
-    tmp_path: Path,
+    tmp_path: Path, eval_ema: float
 ) -> None:
     cfg = make_config(
         {"alg": "vdn", "workers": 1, "episodes": 6, "out": str(tmp_path), "progress": False},
         dict(kv.split("=") for kv in TINY),
-        {"eval_every": 2, "eval_episodes": 3, "final_eval_episodes": 4},
+        {"eval_every": 2, "eval_episodes": 3, "final_eval_episodes": 4, "eval_ema": eval_ema},
     )
     trainer = Trainer(cfg)
     played: dict[str, set[int]] = {"validation": set(), "test": set()}
     run = trainer.sampler.run
+    averaged = []  # per evaluation: did it play weights other than the latest?
 
     def recording_run(requests: list[Request]) -> list[Episode]:
         split = "test" if requests[0].seed >= cfg.eval_seed + TEST_SEED_OFFSET else "validation"
         played[split].update(r.seed for r in requests)
+        sent = ray.get(trainer.sampler.weights_ref).weights
+
+        def same(w: dict[str, np.ndarray]) -> bool:
+            return all(np.array_equal(sent[k], v) for k, v in w.items())
+
+        if same(trainer.learner.policy_weights()):  # validation, and the final test
+            averaged.append(not same(trainer.learner.acting_weights()))
+        else:  # the best-validated weights' test
+            assert split == "test" and trainer.best is not None and same(trainer.best[0])
         return run(requests)
 
     trainer.sampler.run = recording_run  # type: ignore[method-assign]
@@ -150,6 +161,15 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
     assert best["validation"]["win_rate"] == max(e["win_rate"] for e in validation)
     assert best["validation"]["episodes"] == best["chosen_at_episodes"]
     assert (tmp_path / "best.pt").is_file()
+    # the checkpoints hand the match command the evaluated weights (the average, when kept)
+    assert trainer.best is not None
+    for path, weights in (
+        (tmp_path / "best.pt", trainer.best[0]),
+        (tmp_path, trainer.learner.policy_weights()),
+    ):
+        loaded = load_policy(path).weights
+        assert all(np.array_equal(loaded[k], v) for k, v in weights.items())
+    assert any(averaged) == (eval_ema > 0)
 
 
 def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: Path) -> None:
