@@ -3,7 +3,8 @@
 :func:`evaluate_checkpoint` is what ``neuronsmae-match --blue runs/.../checkpoint.pt`` calls:
 it plays the checkpoint's agents greedily (ε = 0, available actions only) against the bot
 on seeds ``seed, seed+1, ...`` in an in-process arena and returns the win rate.
-:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers.
+:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers, and
+:class:`EnsemblePolicy` several checkpoints acting as one.
 """
 
 from __future__ import annotations
@@ -67,8 +68,12 @@ class GreedyPolicy:
         self.hidden, self.last = None, None
 
     @torch.no_grad()
-    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
-        """Greedy available action of every agent, given their observations and masks."""
+    def q_values(self, obs: Sequence[np.ndarray]) -> torch.Tensor:
+        """Q-values ``[n_agents, n_actions]`` for this decision; advances the recurrent state.
+
+        Follow it with :meth:`chose` (``act`` does both), so the next decision's input holds
+        the actions actually taken.
+        """
         x = torch.as_tensor(self.featurize(np.asarray(obs, np.float32)))
         n = x.shape[0]
         if self.hidden is None or self.last is None:
@@ -82,8 +87,49 @@ class GreedyPolicy:
             agent_id=self.spec.agent_id,
         )
         q, self.hidden = self.agent(inputs.unsqueeze(1), self.hidden)
-        self.last = masked_greedy(q[:, 0], torch.as_tensor(np.asarray(avail)) > 0)
-        return [int(a) for a in self.last]
+        return q[:, 0]
+
+    def chose(self, actions: torch.Tensor) -> None:
+        """Record the actions taken (``[n_agents]``, int64): the next input's last actions."""
+        self.last = actions
+
+    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
+        """Greedy available action of every agent, given their observations and masks."""
+        chosen = masked_greedy(self.q_values(obs), torch.as_tensor(np.asarray(avail)) > 0)
+        self.chose(chosen)
+        return [int(a) for a in chosen]
+
+
+class EnsemblePolicy:
+    """Several checkpoints acting as one: greedy on the mean of their Q-values.
+
+    Every member keeps its own recurrent state and is told the ensemble's actions, so each
+    sees the episode it would see if it acted alone and chose those actions. Why: runs that
+    reach the same win rate lose different games (``python -m bench.agreement``), and
+    averaging their values decides the close calls on which they disagree.
+    """
+
+    def __init__(self, paths: Sequence[str | os.PathLike[str]]) -> None:
+        if not paths:
+            raise ValueError("an ensemble needs at least one checkpoint")
+        self.members = [GreedyPolicy(p) for p in paths]
+        actions = {m.spec.n_actions for m in self.members}
+        if len(actions) != 1:
+            raise ValueError(f"the checkpoints disagree on the number of actions: {actions}")
+
+    def reset(self) -> None:
+        """Forget every member's recurrent state at the start of an episode."""
+        for member in self.members:
+            member.reset()
+
+    @torch.no_grad()
+    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
+        """Greedy available action on the members' mean Q-values."""
+        q = torch.stack([m.q_values(obs) for m in self.members]).mean(dim=0)
+        chosen = masked_greedy(q, torch.as_tensor(np.asarray(avail)) > 0)
+        for member in self.members:
+            member.chose(chosen)
+        return [int(a) for a in chosen]
 
 
 def evaluate_checkpoint(
