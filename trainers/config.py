@@ -167,6 +167,12 @@ class TrainConfig:
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
     """Give the agent network its one-hot agent index."""
+    ally_action_input: bool = False
+    """Give each agent its team-mates' one-hot last actions too: the enemy and candidate
+    point each mate is heading for, which its pose does not show. Decisions are
+    simultaneous, so without it an agent can only guess where its mate will be when
+    choosing a point that complements it. Executing such a policy on robots needs the mates
+    to share their last choice (one byte per decision)."""
     buffer_size: int = 5000
     """Replay capacity in episodes."""
     batch_size: int = 32

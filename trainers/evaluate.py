@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuronsmae.trainers.agent import build_inputs, masked_greedy
+from neuronsmae.trainers.agent import masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_key
 from neuronsmae.trainers.config import LEVELS
@@ -79,13 +79,7 @@ class GreedyPolicy:
         if self.hidden is None or self.last is None:
             self.hidden = self.agent.initial_hidden(n)
             self.last = torch.full((n,), -1, dtype=torch.int64)
-        inputs = build_inputs(
-            x,
-            self.last,
-            self.spec.n_actions,
-            last_action=self.spec.last_action,
-            agent_id=self.spec.agent_id,
-        )
+        inputs = self.spec.inputs(x, self.last)
         q, self.hidden = self.agent(inputs.unsqueeze(1), self.hidden)
         return q[:, 0]
 

@@ -71,6 +71,20 @@ class AgentSpec:
     """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
     head: str = "flat"
     """Q head: flat (one linear output per action) or points (plus a per-action scorer)."""
+    ally_actions: bool = False
+    """Feed the team-mates' one-hot last actions (the goals they are driving to)."""
+
+    def inputs(self, obs: torch.Tensor, last_actions: torch.Tensor) -> torch.Tensor:
+        """The network's input from featurized observations and last actions (see
+        :func:`~neuronsmae.trainers.agent.build_inputs` for the shapes)."""
+        return build_inputs(
+            obs,
+            last_actions,
+            self.n_actions,
+            last_action=self.last_action,
+            agent_id=self.agent_id,
+            ally_actions=self.ally_actions,
+        )
 
     def build(self) -> RNNAgent:
         """A fresh network with this architecture."""
@@ -87,15 +101,23 @@ def agent_spec(
     agent_id: bool,
     features: str = "raw",
     head: str = "flat",
+    ally_actions: bool = False,
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
     ``env.obs_dim`` is the width *after* the feature set (what the buffer stores).
     """
     width = agent_input_dim(
-        env.obs_dim, env.n_actions, env.n_agents, last_action=last_action, agent_id=agent_id
+        env.obs_dim,
+        env.n_actions,
+        env.n_agents,
+        last_action=last_action,
+        agent_id=agent_id,
+        ally_actions=ally_actions,
     )
-    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features, head)
+    return AgentSpec(
+        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, ally_actions
+    )
 
 
 def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:
@@ -103,13 +125,7 @@ def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:
 
     Agents are folded into the batch (``[B·n, T+1, D]``) so one GRU call covers them all.
     """
-    inputs = build_inputs(
-        batch.obs,
-        batch.last_actions,
-        spec.n_actions,
-        last_action=spec.last_action,
-        agent_id=spec.agent_id,
-    )
+    inputs = spec.inputs(batch.obs, batch.last_actions)
     b, t1, n, d = inputs.shape
     flat = inputs.permute(0, 2, 1, 3).reshape(b * n, t1, d)
     q, _ = agent(flat, agent.initial_hidden(b * n))

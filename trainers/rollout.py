@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from neuronsmae.protocol import ArenaAPI
-from neuronsmae.trainers.agent import build_inputs, epsilon_greedy
+from neuronsmae.trainers.agent import epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
@@ -137,13 +137,7 @@ class RolloutWorker:
         last = torch.full((n,), -1, dtype=torch.int64)
         done, info = False, {}
         for _ in range(self.episode_limit):
-            inputs = build_inputs(
-                torch.from_numpy(obs[-1]),
-                last,
-                spec.n_actions,
-                last_action=spec.last_action,
-                agent_id=spec.agent_id,
-            )
+            inputs = spec.inputs(torch.from_numpy(obs[-1]), last)
             q, hidden = self.agent(inputs.unsqueeze(1), hidden)
             act = epsilon_greedy(q[:, 0], torch.from_numpy(avails[-1]), epsilon, self.generator)
             next_obs, reward, done, info = env.step([int(a) for a in act])

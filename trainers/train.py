@@ -127,6 +127,7 @@ class Trainer:
             cfg.agent_id_input,
             cfg.features,
             cfg.head,
+            cfg.ally_action_input,
         )
         self.learner = QLearner(
             self.env,

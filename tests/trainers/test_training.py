@@ -109,11 +109,19 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "eval_every": 0,
         },
         dict(kv.split("=") for kv in TINY),
-        # augment rides along: its updates must run inside the real loop
-        {"learning_starts": 2, "lr": 1e-3, "lr_final": 1e-4, "augment": "enemies,field,allies"},
+        # augment and the mates' actions ride along: they must work inside the real loop
+        {
+            "learning_starts": 2,
+            "lr": 1e-3,
+            "lr_final": 1e-4,
+            "augment": "enemies,field,allies",
+            "ally_action_input": True,
+        },
     )
     trainer = Trainer(cfg)
     assert len(trainer.group) == 8
+    assert trainer.spec.ally_actions
+    assert trainer.spec.input_dim == trainer.learner.agent.fc1.in_features
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
