@@ -10,6 +10,10 @@ both alike; the median round rate of each is reported, and the median of the pai
 free loopback port with ``time_scale=0`` (unpaced). Also measures the round trip of a
 ``ping`` (median and p99). Prints a Markdown table and writes bench/out/transport.json.
 
+Per-thread CPU time per decision (client and server, main thread and the rest) shows where
+the Zenoh path's extra cost lands: the server's main thread runs the arena and the codec,
+the other threads are mostly Zenoh's runtime.
+
 Wall-clock rates are what a trainer sees, but on a loaded machine they favour the remote
 pair (two processes that sleep in turn get more of a contended CPU than one busy process).
 The CPU-time rates (decisions per CPU second of the bench process, plus the server's for
@@ -50,6 +54,19 @@ def free_port() -> int:
 def cpu_seconds(procs: list[psutil.Process]) -> float:
     """User + system CPU time used so far by ``procs`` (all their threads)."""
     return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
+
+
+def thread_cpu(proc: psutil.Process) -> tuple[float, float]:
+    """CPU seconds so far of ``proc``'s main thread and of all its other threads (Zenoh's
+    runtime, Ray's, numba's): the split says whether a cost is the arena's or the
+    transport's."""
+    main = other = 0.0
+    for t in proc.threads():
+        if t.id == proc.pid:
+            main += t.user_time + t.system_time
+        else:
+            other += t.user_time + t.system_time
+    return main, other
 
 
 def play(
@@ -101,13 +118,14 @@ def compare(name: str, options: dict[str, Any], decisions: int, rounds: int) -> 
         play(local, 5, np.random.default_rng(0), continuous, me)  # warm both up
         play(remote, 5, np.random.default_rng(0), continuous, both)
         runs: dict[str, list[tuple[float, float]]] = {"in_process": [], "zenoh": []}
+        threads = np.zeros((2, 2, 2))  # [in process / zenoh][client / server][main / other]
         for r in range(rounds):
-            runs["in_process"].append(
-                play(local, decisions, np.random.default_rng(r), continuous, me)
-            )
-            runs["zenoh"].append(
-                play(remote, decisions, np.random.default_rng(r), continuous, both)
-            )
+            for k, (path, env, procs) in enumerate(
+                (("in_process", local, me), ("zenoh", remote, both))
+            ):
+                before = np.array([thread_cpu(p) for p in both])
+                runs[path].append(play(env, decisions, np.random.default_rng(r), continuous, procs))
+                threads[k] += np.array([thread_cpu(p) for p in both]) - before
     finally:
         remote.close()
         local.close()
@@ -122,6 +140,15 @@ def compare(name: str, options: dict[str, Any], decisions: int, rounds: int) -> 
         "in_process_decisions_per_cpu_s": round(cpu[0], 1),
         "zenoh_decisions_per_cpu_s": round(cpu[1], 1),
         "cpu_ratio": round(cpu[2], 3),
+        "cpu_us_per_decision": {
+            side: {
+                f"{who}_{part}": round(float(threads[k, i, j]) / (rounds * decisions) * 1e6, 1)
+                for i, who in enumerate(("client", "server"))
+                for j, part in enumerate(("main", "other"))
+                if not (side == "in_process" and who == "server")
+            }
+            for k, side in enumerate(("in_process", "zenoh"))
+        },
         "rounds": {k: [[round(w, 1), round(c, 1)] for w, c in v] for k, v in runs.items()},
     }
 
@@ -168,6 +195,14 @@ def main() -> None:
         "cpu_ratio",
     ]
     print(table(results, columns))
+    cpu_rows = [
+        {"config": r["config"], "path": side, **r["cpu_us_per_decision"][side]}
+        for r in results
+        for side in ("in_process", "zenoh")
+    ]
+    print("CPU µs per decision by thread (main = the arena's or the client loop's):")
+    parts = ["client_main", "client_other", "server_main", "server_other"]
+    print(table(cpu_rows, ["config", "path", *parts]))
     print(f"target: zenoh ≥ {TARGET:.0%} of in-process")
     print(f"ping round trip: median {rtt['median_us']:.0f} µs, p99 {rtt['p99_us']:.0f} µs")
     report = {
