@@ -48,6 +48,11 @@ def policy_key(learner_state: dict[str, Any]) -> str:
     return "average_agent" if "average_agent" in learner_state else "agent"
 
 
+def policy_weights(learner_state: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The :func:`policy_key` weights of a saved learner state, as NumPy arrays."""
+    return {k: v.numpy() for k, v in learner_state[policy_key(learner_state)].items()}
+
+
 def checkpoint_path(path: str | os.PathLike[str]) -> Path:
     """A checkpoint file from either its own path or its run directory."""
     p = Path(path)

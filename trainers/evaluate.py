@@ -18,7 +18,7 @@ import torch
 
 from neuronsmae.trainers.agent import masked_greedy
 from neuronsmae.trainers.buffer import Episode
-from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_key
+from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
 from neuronsmae.trainers.config import LEVELS
 from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
@@ -46,9 +46,7 @@ def load_policy(path: str | os.PathLike[str]) -> Policy:
     """The acting part of a checkpoint (file or run directory): architecture and weights."""
     payload = load_checkpoint(path)
     spec = AgentSpec(**payload["agent_spec"])
-    learner = payload["learner"]
-    weights = {k: v.numpy() for k, v in learner[policy_key(learner)].items()}
-    return Policy(spec, weights)
+    return Policy(spec, policy_weights(payload["learner"]))
 
 
 class GreedyPolicy:

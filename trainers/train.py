@@ -38,6 +38,7 @@ from neuronsmae.trainers.checkpoint import (
     Counters,
     load_checkpoint,
     policy_key,
+    policy_weights,
     restore_rng,
     save_checkpoint,
 )
@@ -168,9 +169,7 @@ class Trainer:
         best = self.run_dir / BEST_NAME
         if self.cfg.keep_best and best.is_file():
             chosen = load_checkpoint(best)
-            kept = chosen["learner"]
-            weights = {k: v.numpy() for k, v in kept[policy_key(kept)].items()}
-            self.best = (weights, chosen["selection"])
+            self.best = (policy_weights(chosen["learner"]), chosen["selection"])
         log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
 
     def close(self) -> None:
