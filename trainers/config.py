@@ -180,6 +180,12 @@ class TrainConfig:
     """Replay capacity in episodes."""
     batch_size: int = 32
     """Episodes per gradient update."""
+    priority_alpha: float = 0.0
+    """Prioritised replay: draw episodes with probability ∝ (mean |TD error| of their last
+    replay) ** α; 0 samples uniformly (the paper's and PyMARL's buffer)."""
+    priority_beta: float = 0.4
+    """Exponent of prioritised replay's importance weights at the start of the run; it rises
+    linearly to 1 over the budget, so late updates are unbiased."""
     learning_starts: int = 64
     """Episodes in the buffer before learning begins."""
     train_every: int = 1
@@ -247,6 +253,11 @@ class TrainConfig:
             raise ConfigError(f"lr must be > 0, got {self.lr}")
         if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
             raise ConfigError("eps_start and eps_end must lie in [0, 1]")
+        if self.priority_alpha < 0 or not 0.0 <= self.priority_beta <= 1.0:
+            raise ConfigError(
+                f"priority_alpha must be ≥ 0 (0 = uniform) and priority_beta in [0, 1], got "
+                f"{self.priority_alpha} and {self.priority_beta}"
+            )
         if not 0.0 <= self.eval_ema < 1.0:
             raise ConfigError(f"eval_ema must lie in [0, 1) (0 = off), got {self.eval_ema}")
 
@@ -265,6 +276,11 @@ class TrainConfig:
             return self.lr
         frac = min(max(progress, 0.0), 1.0)
         return self.lr + frac * (self.lr_final - self.lr)
+
+    def beta_at(self, progress: float) -> float:
+        """Prioritised replay's importance-weight exponent at ``progress`` ∈ [0, 1]."""
+        frac = min(max(progress, 0.0), 1.0)
+        return self.priority_beta + frac * (1.0 - self.priority_beta)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""

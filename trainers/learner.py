@@ -192,6 +192,8 @@ class QLearner:
         self.eval_ema = eval_ema
         self.average_agent = copy.deepcopy(self.agent) if eval_ema > 0 else None
         """Exponential moving average of the agent (``eval_ema`` > 0): the evaluated policy."""
+        self.episode_errors = torch.zeros(0)
+        """``[B]`` mean |TD error| of each episode of the last batch: its replay priority."""
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""
@@ -218,8 +220,13 @@ class QLearner:
         mask = batch.filled.unsqueeze(-1).expand_as(q_tot)
         if not self.mixer.team_output:  # IQL: a destroyed robot has no TD error of its own
             mask = mask * batch.alive[:, :-1]
-        td = (q_tot - targets) * mask
-        loss = (td**2).sum() / mask.sum().clamp(min=1.0)
+        td = (q_tot - targets) * mask  # [B, T, 1 or n]
+        squared = td**2
+        if batch.weights is not None:  # prioritised replay: undo the sampling bias
+            squared = squared * batch.weights[:, None, None]
+        loss = squared.sum() / mask.sum().clamp(min=1.0)
+        with torch.no_grad():
+            self.episode_errors = td.abs().sum((1, 2)) / mask.sum((1, 2)).clamp(min=1.0)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)

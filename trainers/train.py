@@ -257,10 +257,15 @@ class Trainer:
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
         if rounds and len(self.buffer) >= cfg.learning_starts:
-            self.learner.set_lr(cfg.lr_at(self._progress()))
+            progress = self._progress()
+            self.learner.set_lr(cfg.lr_at(progress))
+            alpha, beta = cfg.priority_alpha, cfg.beta_at(progress)
             for _ in range(rounds * cfg.updates_per_round):
-                batch = self.buffer.sample(cfg.batch_size, self.np_rng)
+                batch = self.buffer.sample(cfg.batch_size, self.np_rng, alpha, beta)
                 self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
+                if alpha > 0 and batch.index is not None:
+                    errors = self.learner.episode_errors.numpy()
+                    self.buffer.update_priorities(batch.index.numpy(), errors)
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
         self.recorder.advance(c.episodes - before)

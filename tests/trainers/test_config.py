@@ -58,6 +58,8 @@ def test_set_overrides_are_typed() -> None:
         (["batch_size=0"], "batch_size must be"),
         (["features=polar"], "valid: exposure, raw, relative"),
         (["features=raw"], "head='points' needs features in .*'relative', 'exposure'"),
+        (["priority_alpha=-1"], "priority_alpha must be ≥ 0"),
+        (["priority_beta=1.5"], "priority_beta in \\[0, 1\\]"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
@@ -108,3 +110,8 @@ def test_learning_rate_schedule_is_linear_over_the_budget_and_off_by_default() -
     assert cfg.lr_at(3.0) == pytest.approx(1e-4)
     with pytest.raises(ConfigError, match="lr must be > 0"):
         TrainConfig(lr=0.0)
+
+
+def test_importance_weight_exponent_rises_to_one_over_the_budget() -> None:
+    cfg = TrainConfig(priority_alpha=0.6, priority_beta=0.4)
+    assert [cfg.beta_at(p) for p in (0.0, 0.5, 1.0, 2.0)] == pytest.approx([0.4, 0.7, 1.0, 1.0])

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import fields, replace
+
 import numpy as np
 import pytest
 import torch
 
-from neuronsmae.trainers.buffer import EpisodeReplayBuffer
+from neuronsmae.trainers.buffer import Batch, EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec, lambda_returns
 
 from .conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode
@@ -123,3 +125,44 @@ def test_weight_average_follows_every_update_and_is_the_evaluated_policy() -> No
     assert off.average_agent is None and "average_agent" not in off.state_dict()
     for k, v in off.policy_weights().items():
         assert np.array_equal(v, off.acting_weights()[k])
+
+
+_FIELDS = [f.name for f in fields(Batch) if f.name not in ("index", "weights")]
+"""The per-episode tensors of a batch."""
+
+
+def _masked_steps(batch: Batch, mixer: str) -> torch.Tensor:
+    """Per episode, the TD terms the loss averages over: steps, or live agent-steps (IQL)."""
+    if mixer == "none":
+        return (batch.filled.unsqueeze(-1) * batch.alive[:, :-1]).sum((1, 2))
+    return batch.filled.sum(1)
+
+
+@pytest.mark.parametrize("mixer", ["none", "vdn", "qmix"])
+def test_importance_weights_scale_each_episode_and_errors_are_per_episode(mixer: str) -> None:
+    rng = np.random.default_rng(5)
+    buf = EpisodeReplayBuffer(2, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    buf.add(make_episode(LIMIT, rng, dead_from=2))
+    buf.add(make_episode(3, rng, dead_from=None))
+    both = buf.sample(2, np.random.default_rng(0))
+    assert both.index is not None
+    first = int(torch.argmax(both.filled.sum(1)))  # the full-length episode, cut the same alone
+    alone = replace(both, **{f: getattr(both, f)[first : first + 1] for f in _FIELDS}, index=None)
+
+    def train(batch: Batch) -> tuple[float, torch.Tensor]:
+        torch.manual_seed(0)
+        learner = _learner(mixer)
+        return learner.train(batch)["loss"], learner.episode_errors.clone()
+
+    loss, errors = train(both)
+    assert train(replace(both, weights=torch.ones(2)))[0] == loss  # unit weights: no change
+    assert errors.shape == (2,) and bool((errors > 0).all())
+    only = torch.zeros(2)
+    only[first] = 1.0
+    loss_only, errors_only = train(replace(both, weights=only))
+    loss_alone, errors_alone = train(alone)
+    # The loss is still averaged over both episodes' terms, but only the first one's count.
+    steps = _masked_steps(both, mixer)
+    assert loss_only * float(steps.sum()) == pytest.approx(loss_alone * float(steps[first]))
+    assert errors_only[first] == pytest.approx(float(errors_alone[0]))
+    assert errors_only.tolist() == pytest.approx(errors.tolist())  # weights leave errors alone

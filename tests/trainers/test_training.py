@@ -109,13 +109,15 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "eval_every": 0,
         },
         dict(kv.split("=") for kv in TINY),
-        # augment and the mates' actions ride along: they must work inside the real loop
+        # augment, the mates' actions and prioritised replay ride along: they must work
+        # inside the real loop
         {
             "learning_starts": 2,
             "lr": 1e-3,
             "lr_final": 1e-4,
             "augment": "enemies,field,allies",
             "ally_action_input": True,
+            "priority_alpha": 0.6,
         },
     )
     trainer = Trainer(cfg)
@@ -130,6 +132,9 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     with (tmp_path / "train.csv").open() as f:
         lrs = [float(row["lr"]) for row in csv.DictReader(f) if row["lr"]]
     assert lrs == pytest.approx([5.5e-4, 1e-4])
+    # replayed episodes carry their TD errors as priorities (new ones start at 1)
+    priorities = trainer.buffer.priorities[: len(trainer.buffer)]
+    assert (priorities != 1.0).any() and trainer.buffer.max_priority >= priorities.max()
 
 
 @pytest.mark.parametrize("eval_ema", [0.0, 0.5])
