@@ -150,9 +150,10 @@ class TrainConfig:
     validation curve of any run, but 0.825 on the test split, no better than without."""
     features: str = "relative"
     """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
-    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2) or
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2),
     exposure (relative, plus what each candidate point offers the other enemy; no better than
-    relative against the easy bot in 30 minutes, docs/results.md)."""
+    relative against the easy bot in 30 minutes, docs/results.md) or sight (exposure, plus
+    which tall walls stand between the robots and between each point and the other enemy)."""
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
     that scores each action from its enemy's and point's features; needs 'relative' or

@@ -33,6 +33,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from neuronsmae.server.sim.field import CENTER, obstacle_array
+
 HALF_X, HALF_Y = 4.04, 2.24
 """Half the field's interior size (m): the observation's position scale."""
 SCALE = 8.0
@@ -118,6 +120,74 @@ def exposure(obs: np.ndarray) -> np.ndarray:
     return np.concatenate(out, axis=-1).astype(np.float32)
 
 
+EXPOSURE_DIM = RELATIVE_DIM + N_ENEMY * K * EXPOSURE_PER_POINT
+"""Width of the ``exposure`` features (121)."""
+SIGHT_PER_ENEMY = 2 + K
+"""``sight`` columns per enemy: can I see it, can my ally, and, for each of its candidate
+points, could the *other* enemy see a robot standing there."""
+
+
+def _sight_boxes() -> np.ndarray:
+    """The tall obstacles as ``(m, 4)`` axis-aligned boxes ``x_lo, y_lo, x_hi, y_hi`` (m).
+
+    The released layout is centrally symmetric to within 2 cm; each box here is averaged
+    with its partner's half-turned image so that the map is symmetric exactly, which keeps
+    the features unchanged under the ``field`` symmetry of :mod:`neuronsmae.trainers.symmetry`.
+    The tall ones are all axis-aligned; the low ones block neither shots nor sight.
+    """
+    boxes = obstacle_array(tall_only=True)
+    assert np.all(boxes[:, 4] == 0.0), "tall obstacles are axis-aligned"
+    centre = np.asarray(CENTER)
+    xy, half = boxes[:, :2], boxes[:, 2:4]
+    mirrored = 2.0 * centre - xy
+    partner = np.argmin(np.linalg.norm(xy[:, None] - mirrored[None], axis=-1), axis=1)
+    xy = (xy + mirrored[partner]) / 2.0
+    half = (half + half[partner]) / 2.0
+    return np.concatenate([xy - half, xy + half], axis=1)
+
+
+SIGHT_BOXES = _sight_boxes()
+
+
+def clear_sight(p0: np.ndarray, p1: np.ndarray, boxes: np.ndarray = SIGHT_BOXES) -> np.ndarray:
+    """Whether the segments ``p0 → p1`` (``[..., 2]`` metres) miss every box: ``[...]`` bool.
+
+    A vectorised slab test. Robots do not occlude here (they move; the obstacles are the
+    arena's fixed knowledge), so this is the sight the layout allows, not the referee's.
+    """
+    d = (p1 - p0)[..., None, :]  # [..., 1, 2]
+    start = p0[..., None, :]
+    lo, hi = boxes[:, :2], boxes[:, 2:]  # [m, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - start) / d, (hi - start) / d
+    inside = (start >= lo) & (start <= hi)
+    flat = d == 0.0  # parallel to a slab: inside it for every t, or for none
+    near = np.where(flat, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
+    far = np.where(flat, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
+    enter = np.maximum(near.max(-1), 0.0)
+    leave = np.minimum(far.min(-1), 1.0)
+    return ~(enter <= leave).any(-1)
+
+
+def sight(obs: np.ndarray) -> np.ndarray:
+    """``obs [..., 37]`` → ``[..., 121 + 12]``: ``exposure``, then what the walls hide.
+
+    Per enemy ``j`` (columns ``121 + 6j`` onward, 1 = clear, 0 = blocked by a tall
+    obstacle): whether I see it, whether my ally does, and for each of its 4 candidate
+    points whether the other enemy sees that point. ``exposure`` tells how a point faces
+    the other enemy but not whether a wall stands between them; a point hidden from it is
+    a duel instead of a crossfire, which is how close races on HP are lost.
+    """
+    me, ally = _xy(obs, 0), _xy(obs, 3)
+    starts, ends = [], []  # per enemy: me, ally, then its 4 points; all tested in one call
+    for j in range(N_ENEMY):
+        enemy, other = _xy(obs, 6 + 3 * j), _xy(obs, 6 + 3 * (1 - j))
+        starts += [me, ally, *(_xy(obs, 12 + 2 * (K * j + k)) for k in range(K))]
+        ends += [enemy, enemy, *([other] * K)]
+    clear = clear_sight(np.stack(starts, -2), np.stack(ends, -2))  # [..., 2 · (2 + K)]
+    return np.concatenate([exposure(obs), clear.astype(np.float32)], axis=-1)
+
+
 def action_feature_index(features: str, n_actions: int) -> np.ndarray:
     """Columns of the features that describe each abstract action: ``[8, 17]`` or ``[8, 22]``.
 
@@ -148,9 +218,12 @@ def action_feature_index(features: str, n_actions: int) -> np.ndarray:
                 *range(base + 6 + 4 * k, base + 10 + 4 * k),
             ]
         )
-        if features == "exposure":
+        if features in ("exposure", "sight"):
             start = RELATIVE_DIM + EXPOSURE_PER_POINT * a
             rows[-1] += range(start, start + EXPOSURE_PER_POINT)
+        if features == "sight":
+            start = EXPOSURE_DIM + SIGHT_PER_ENEMY * j
+            rows[-1] += [start, start + 1, start + 2 + k]
     return np.asarray(rows, np.int64)
 
 
@@ -163,9 +236,10 @@ FEATURES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "raw": raw,
     "relative": relative,
     "exposure": exposure,
+    "sight": sight,
 }
 """Feature sets by name."""
-POINT_FEATURES = ("relative", "exposure")
+POINT_FEATURES = ("relative", "exposure", "sight")
 """Feature sets that describe each abstract action, as the ``points`` head needs."""
 
 

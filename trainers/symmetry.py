@@ -11,7 +11,7 @@ valid episode after any of them:
   ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
   becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative`` and
   ``exposure`` features are built from differences of positions and of angles, so they do
-  not change at all.
+  not change at all; neither do ``sight``'s, tested against a map made exactly symmetric.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.
@@ -22,7 +22,7 @@ the way image models see flipped images: the Q-values of a relabelled scene must
 relabelled Q-values, and the learner no longer has to discover that from data.
 
 The transforms assume the layouts the trainers build on: the full 37-value abstract 2 v 2
-observation (``docs/options.md``), its ``relative`` and ``exposure`` extensions
+observation (``docs/options.md``), its ``relative``, ``exposure`` and ``sight`` extensions
 (:mod:`neuronsmae.trainers.features`), the 21-value global state (per robot x, y, yaw, HP,
 bullets, blue first, then the time) and 8 actions. :func:`task_group` refuses any other.
 """
@@ -38,10 +38,12 @@ import torch
 
 from neuronsmae.trainers.buffer import Batch
 from neuronsmae.trainers.features import (
+    EXPOSURE_DIM,
     EXPOSURE_PER_POINT,
     LAYOUT_37,
     RELATIVE_DIM,
     RELATIVE_PER_ENEMY,
+    SIGHT_PER_ENEMY,
     feature_dim,
 )
 
@@ -127,6 +129,8 @@ def _enemies(obs_dim: int) -> Symmetry:
     if obs_dim > RELATIVE_DIM:
         block = EXPOSURE_PER_POINT * K
         pairs.append((RELATIVE_DIM, RELATIVE_DIM + block, block))
+    if obs_dim > EXPOSURE_DIM:
+        pairs.append((EXPOSURE_DIM, EXPOSURE_DIM + SIGHT_PER_ENEMY, SIGHT_PER_ENEMY))
     state = _swap(STATE_DIM, [(5 * N_AGENTS, 5 * (N_AGENTS + 1), 5)])
     return Symmetry(
         "enemies",

@@ -56,7 +56,7 @@ def test_set_overrides_are_typed() -> None:
         (["alg=mappo"], "valid: iql, qmix, vdn"),
         (["level=expert"], "valid: easy, middle, hard"),
         (["batch_size=0"], "batch_size must be"),
-        (["features=polar"], "valid: exposure, raw, relative"),
+        (["features=polar"], "valid: exposure, raw, relative, sight"),
         (["features=raw"], "head='points' needs features in .*'relative', 'exposure'"),
         (["priority_alpha=-1"], "priority_alpha must be ≥ 0"),
         (["priority_beta=1.5"], "priority_beta in \\[0, 1\\]"),
