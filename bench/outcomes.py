@@ -6,10 +6,12 @@ Plays the checkpoint greedily against the bot (in process, episode ``k`` reset w
 ``S + k``, the same starts the trainer's test split uses when ``S = 10⁹ + 10⁷``) and
 records for every episode its winner, its length in decisions, each team's HP and bullets
 left, the damage each team dealt per bullet fired, the decision after which each team had
-no bullets left, and the kills. Prints the episodes that were not won, a summary table,
-and writes ``bench/out/outcomes.json``. Why: the win rate alone cannot tell a policy that
-loses by being destroyed from one that loses close races on HP at the time limit, which
-call for different fixes (see docs/results.md).
+no bullets left, the kills, and the agents' own value of the start (their team Q at the
+first decision). Prints the episodes that were not won, a summary table, the win rate by
+fifth of that value, and writes ``bench/out/outcomes.json``. Why: the win rate alone cannot
+tell a policy that loses by being destroyed from one that loses close races on HP at the
+time limit, which call for different fixes (see docs/results.md); nor starts the agents
+judge bad from games they expected to win and then lost.
 """
 
 from __future__ import annotations
@@ -20,20 +22,21 @@ import statistics
 import time
 from typing import Any
 
+import numpy as np
 import torch
 
 from bench.common import machine, table, write_json
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.sim.field import START_BULLETS
 from neuronsmae.trainers.config import TrainConfig
-from neuronsmae.trainers.evaluate import GreedyPolicy, MatchPolicy
+from neuronsmae.trainers.evaluate import GreedyPolicy, MatchPolicy, QPolicy, act_greedily
 from neuronsmae.trainers.train import TEST_SEED_OFFSET
 
 TEST_SEED = TrainConfig().eval_seed + TEST_SEED_OFFSET
 """First seed of the trainer's test split, so the games are those its final figures count."""
 
 
-def play(policy: GreedyPolicy, arena: Arena, level: str, seed: int) -> dict[str, Any]:
+def play(policy: QPolicy, arena: Arena, level: str, seed: int) -> dict[str, Any]:
     """One greedy episode; the outcome as plain values (blue = the checkpoint's team).
 
     Besides the end state it keeps what decides a race on HP when bullets run out: the
@@ -42,12 +45,14 @@ def play(policy: GreedyPolicy, arena: Arena, level: str, seed: int) -> dict[str,
     """
     obs = arena.reset(contexts={"level": level}, seed=seed)
     policy.reset()
-    done, decisions, info = False, 0, {}
+    done, decisions, info, opening = False, 0, {}, float("nan")
     dry: dict[str, int | None] = {"blue": None, "red": None}
     fired = {"blue": 0, "red": 0}
     before = {"blue": 2 * START_BULLETS, "red": 2 * START_BULLETS}
     while not done:
-        obs, _, done, info = arena.step(policy.act(obs, arena.get_avail_actions()))
+        actions, value = act_greedily(policy, obs, arena.get_avail_actions())
+        opening = value if decisions == 0 else opening
+        obs, _, done, info = arena.step(actions)
         decisions += 1
         for team, left in (("blue", info["bullets"][:2]), ("red", info["bullets"][2:])):
             fired[team] += max(before[team] - sum(left), 0)  # counted, so refills cannot skew it
@@ -68,6 +73,7 @@ def play(policy: GreedyPolicy, arena: Arena, level: str, seed: int) -> dict[str,
         "blue_dry_at": dry["blue"],
         "red_dry_at": dry["red"],
         "kills": info["kills"],
+        "opening_value": opening,
     }
 
 
@@ -110,6 +116,33 @@ def summarize(games: list[dict[str, Any]], limit: int) -> list[dict[str, Any]]:
     return rows
 
 
+def by_opening_value(games: list[dict[str, Any]], parts: int = 5) -> list[dict[str, Any]]:
+    """Win rate in each fifth (``parts``) of the games, ranked by the agents' own value of
+    the start (their team Q at the first decision), lowest first.
+
+    Why: if the games lost are those the agents already value lowest before they act, the
+    losses come from starts they judge bad, not from mistakes later in games they expected
+    to win.
+    """
+    ranked = sorted(games, key=lambda g: g["opening_value"])
+    rows = []
+    for k, group in enumerate(np.array_split(np.arange(len(ranked)), parts)):
+        chosen = [ranked[i] for i in group]
+        if not chosen:
+            continue
+        values = [g["opening_value"] for g in chosen]
+        rows.append(
+            {
+                "fifth": k + 1,
+                "lowest_value": round(min(values), 2),
+                "highest_value": round(max(values), 2),
+                "episodes": len(chosen),
+                "win_rate": sum(g["winner"] == "blue" for g in chosen) / len(chosen),
+            }
+        )
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("checkpoint", help="checkpoint file or run directory")
@@ -135,12 +168,16 @@ def main() -> None:
             )
     rows = summarize(games, limit)
     print(table(rows, list(rows[0])))
+    fifths = by_opening_value(games)
+    print("win rate by the agents' own value of the start (team Q at the first decision):")
+    print(table(fifths, list(fifths[0])))
     report = {
         "checkpoint": args.checkpoint,
         "level": args.level,
         "seed": args.seed,
         "episode_limit": limit,
         "summary": rows,
+        "by_opening_value": fifths,
         "games": games,
         "machine": machine(),
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -87,9 +87,7 @@ class GreedyPolicy:
 
     def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
         """Greedy available action of every agent, given their observations and masks."""
-        chosen = masked_greedy(self.q_values(obs), torch.as_tensor(np.asarray(avail)) > 0)
-        self.chose(chosen)
-        return [int(a) for a in chosen]
+        return act_greedily(self, obs, avail)[0]
 
 
 class EnsemblePolicy:
@@ -115,13 +113,43 @@ class EnsemblePolicy:
             member.reset()
 
     @torch.no_grad()
+    def q_values(self, obs: Sequence[np.ndarray]) -> torch.Tensor:
+        """The members' mean Q-values ``[n_agents, n_actions]``; advances their states."""
+        return torch.stack([m.q_values(obs) for m in self.members]).mean(dim=0)
+
+    def chose(self, actions: torch.Tensor) -> None:
+        """Tell every member the actions the ensemble took."""
+        for member in self.members:
+            member.chose(actions)
+
     def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
         """Greedy available action on the members' mean Q-values."""
-        q = torch.stack([m.q_values(obs) for m in self.members]).mean(dim=0)
-        chosen = masked_greedy(q, torch.as_tensor(np.asarray(avail)) > 0)
-        for member in self.members:
-            member.chose(chosen)
-        return [int(a) for a in chosen]
+        return act_greedily(self, obs, avail)[0]
+
+
+class QPolicy(Protocol):
+    """A greedy controller as :func:`act_greedily` drives it: ``reset`` per episode, then per
+    decision Q-values (which advance the recurrent state) and the actions taken told back."""
+
+    def reset(self) -> None: ...
+
+    def q_values(self, obs: Sequence[np.ndarray]) -> torch.Tensor: ...
+
+    def chose(self, actions: torch.Tensor) -> None: ...
+
+
+def act_greedily(
+    policy: QPolicy, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]
+) -> tuple[list[int], float]:
+    """Each agent's greedy available action, and the team's value of them: the sum over
+    agents of the chosen Q-values (VDN's team value; what the agents expect the rest of the
+    episode to bring)."""
+    allowed = torch.as_tensor(np.asarray(avail)) > 0
+    q = policy.q_values(obs)
+    chosen = masked_greedy(q, allowed)
+    policy.chose(chosen)
+    value = float(q.gather(-1, chosen.unsqueeze(-1)).sum())
+    return [int(a) for a in chosen], value
 
 
 def evaluate_checkpoint(

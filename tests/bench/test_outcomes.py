@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from bench.outcomes import summarize
+from bench.outcomes import by_opening_value, summarize
 
 
 def _game(
@@ -14,6 +14,7 @@ def _game(
     bullets: tuple[int, int],
     per_bullet: tuple[float, float] = (1.0, 1.0),
     dry_at: tuple[int | None, int | None] = (None, None),
+    opening_value: float = 0.0,
 ):
     return {
         "blue_damage_per_bullet": per_bullet[0],
@@ -28,6 +29,7 @@ def _game(
         "blue_bullets": bullets[0],
         "red_bullets": bullets[1],
         "kills": [0, 0, 0, 0],
+        "opening_value": opening_value,
     }
 
 
@@ -63,3 +65,19 @@ def test_summary_of_no_losses_has_no_margin() -> None:
     _, lost = summarize([_game("blue", 10, (100.0, 0.0), (5, 5))], limit=50)
     assert lost["episodes"] == 0 and math.isnan(lost["median_hp_margin"])
     assert math.isnan(lost["blue_dry_at"])
+
+
+def test_win_rate_by_fifth_of_the_agents_own_opening_value() -> None:
+    # Ten games; the agents valued the start v = 0..9 and won every game valued 4 or more,
+    # and the one valued 1.
+    games = [
+        _game("blue" if v >= 4 or v == 1 else "red", 50, (1.0, 0.0), (0, 0), opening_value=v)
+        for v in (7.0, 2.0, 9.0, 0.0, 5.0, 1.0, 8.0, 3.0, 6.0, 4.0)
+    ]
+    rows = by_opening_value(games)
+    assert [(r["lowest_value"], r["highest_value"]) for r in rows] == [
+        (0.0, 1.0), (2.0, 3.0), (4.0, 5.0), (6.0, 7.0), (8.0, 9.0)
+    ]  # fmt: skip
+    assert [r["win_rate"] for r in rows] == [0.5, 0.0, 1.0, 1.0, 1.0]
+    assert [r["episodes"] for r in rows] == [2] * 5
+    assert len(by_opening_value(games[:3])) == 3  # fewer games than fifths: no empty rows

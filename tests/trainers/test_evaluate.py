@@ -11,7 +11,12 @@ import torch
 from neuronsmae.server.arena import Arena
 from neuronsmae.trainers.checkpoint import Counters, save_checkpoint
 from neuronsmae.trainers.config import TrainConfig
-from neuronsmae.trainers.evaluate import EnsemblePolicy, GreedyPolicy, load_policy
+from neuronsmae.trainers.evaluate import (
+    EnsemblePolicy,
+    GreedyPolicy,
+    act_greedily,
+    load_policy,
+)
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 
 ENV = EnvSpec(n_agents=2, n_actions=8, obs_dim=37, state_dim=21, episode_limit=50)
@@ -84,7 +89,9 @@ def test_ensemble_of_one_plays_exactly_like_its_checkpoint(tmp_path: Path) -> No
     assert taken > 1
 
 
-def test_ensemble_acts_greedily_on_the_mean_q_and_tells_every_member(tmp_path: Path) -> None:
+def test_ensemble_acts_greedily_on_the_mean_q_values_them_and_tells_every_member(
+    tmp_path: Path,
+) -> None:
     paths = [tmp_path / "a.pt", tmp_path / "b.pt"]
     for seed, path in enumerate(paths):
         _checkpoint(path, 10 + seed)
@@ -97,8 +104,9 @@ def test_ensemble_acts_greedily_on_the_mean_q_and_tells_every_member(tmp_path: P
             mask[rng.integers(8)] = 1
         mean_q = torch.stack([t.q_values(obs) for t in twins]).mean(dim=0)
         mean_q = mean_q.masked_fill(torch.as_tensor(np.asarray(avail)) == 0, -np.inf)
-        chosen = ensemble.act(obs, avail)
+        chosen, value = act_greedily(ensemble, obs, avail)
         assert chosen == mean_q.argmax(dim=-1).tolist()
+        assert value == pytest.approx(float(mean_q.max(dim=-1).values.sum()), rel=1e-6)
         for twin, member in zip(twins, ensemble.members, strict=True):
             twin.chose(torch.as_tensor(chosen))
             assert member.last is not None and member.last.tolist() == chosen
