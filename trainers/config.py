@@ -279,17 +279,21 @@ class TrainConfig:
         """The learning rate at ``progress`` ∈ [0, 1] of the budget (see ``lr_final``)."""
         if self.lr_final < 0:
             return self.lr
-        frac = min(max(progress, 0.0), 1.0)
-        return self.lr + frac * (self.lr_final - self.lr)
+        return _linear(self.lr, self.lr_final, progress)
 
     def beta_at(self, progress: float) -> float:
         """Prioritised replay's importance-weight exponent at ``progress`` ∈ [0, 1]."""
-        frac = min(max(progress, 0.0), 1.0)
-        return self.priority_beta + frac * (1.0 - self.priority_beta)
+        return _linear(self.priority_beta, 1.0, progress)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""
         return dataclasses.asdict(self)
+
+
+def _linear(start: float, end: float, progress: float) -> float:
+    """``start`` at progress 0, ``end`` from progress 1 on, linear in between: the shape of
+    every schedule over a run's budget."""
+    return start + min(max(progress, 0.0), 1.0) * (end - start)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
