@@ -212,7 +212,8 @@ class TrainConfig:
     keep_best: bool = True
     """Keep the weights of the best periodic evaluation, write them to ``best.pt`` and
     evaluate them on the test seeds at the end beside the final weights (model selection
-    on validation seeds, as is usual when reporting greedy win rates)."""
+    on validation seeds, as is usual when reporting greedy win rates). Equal readings go to
+    the later weights, which trained longer."""
     checkpoint_every: int = 1000
     """Training episodes between checkpoints (one is always written at the end)."""
     torch_threads: int = 1

@@ -271,10 +271,12 @@ class Trainer:
         self.recorder.advance(c.episodes - before)
         if rounds:
             self.recorder.train(self._train_row())
+        # No periodic evaluation once the budget (episodes or minutes) is spent: the final
+        # one follows at once, and a wall-clock budget must not be overrun by a validation.
         if (
             cfg.eval_every
             and c.episodes // cfg.eval_every > before // cfg.eval_every
-            and c.episodes < cfg.episodes
+            and self._more()
         ):
             self.evaluate()
         if c.episodes // cfg.checkpoint_every > before // cfg.checkpoint_every:
@@ -333,7 +335,9 @@ class Trainer:
         row = {**asdict(c), **figures, "split": split, "weights": weights}
         self.recorder.eval(row)
         self.evals.append(row)
-        better = self.best is None or row["win_rate"] > self.best[1]["win_rate"]
+        # On a tie the later weights win: they trained longer, and a 50-episode validation
+        # figure cannot tell two equal readings apart anyway.
+        better = self.best is None or row["win_rate"] >= self.best[1]["win_rate"]
         if split == "validation" and cfg.keep_best and better:
             self.best = (evaluated.weights, row)
             self._save_best()

@@ -171,7 +171,12 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
     assert played["test"] == {cfg.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
     best, validation = result["best"], [e for e in result["evals"] if e["split"] == "validation"]
     assert best["split"] == "test" and best["weights"] == "best"
-    assert best["validation"]["win_rate"] == max(e["win_rate"] for e in validation)
+    top = max(e["win_rate"] for e in validation)
+    assert best["validation"]["win_rate"] == top
+    # ties go to the later, longer-trained weights
+    assert best["chosen_at_episodes"] == max(
+        e["episodes"] for e in validation if e["win_rate"] == top
+    )
     assert best["validation"]["episodes"] == best["chosen_at_episodes"]
     assert (tmp_path / "best.pt").is_file()
     # the checkpoints hand the match command the evaluated weights (the average, when kept)
@@ -183,6 +188,28 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
         loaded = load_policy(path).weights
         assert all(np.array_equal(loaded[k], v) for k, v in weights.items())
     assert any(averaged) == (eval_ema > 0)
+
+
+def test_no_validation_once_the_wall_clock_budget_is_spent(tmp_path: Path) -> None:
+    cfg = make_config(
+        {"alg": "vdn", "workers": 1, "episodes": 1000, "out": str(tmp_path), "progress": False},
+        dict(kv.split("=") for kv in TINY),
+        {"eval_every": 1, "max_minutes": 10.0},
+    )
+    trainer = Trainer(cfg)
+    train = trainer.learner.train
+
+    def expiring(batch):  # type: ignore[no-untyped-def]
+        trainer.session_start -= 3600.0  # the ten minutes run out during the first update
+        return train(batch)
+
+    trainer.learner.train = expiring  # type: ignore[method-assign]
+    result = trainer.run()
+    validation = [e for e in result["evals"] if e["split"] == "validation"]
+    # every landing before learning began was evaluated (eval_every=1), none after it
+    assert validation and all(e["updates"] == 0 for e in validation)
+    assert result["counters"]["updates"] > 0
+    assert result["final"]["split"] == "test"
 
 
 def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: Path) -> None:
