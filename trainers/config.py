@@ -137,10 +137,11 @@ class TrainConfig:
     """QMIX hypernetwork hidden width."""
     td_lambda: float = 0.3
     """λ of the TD(λ) targets (0: the paper's one-step targets; PyMARL2 uses 0.6). Against
-    the easy bot in 30 minutes, seeds 1 and 2 tested at 0.89 / 0.885 with 0.3, 0.90 / 0.86
-    with 0.1, 0.86 / 0.875 with 0.6, and seed 1 at 0.77 with 0.9 (docs/results.md, runs
-    Z, AA, AB, AC, P, R, W): short returns carry fewer of the ε-greedy actions'
-    consequences into the targets, while λ > 0 still moves a win's +20 back faster."""
+    the easy bot in 30 minutes the test split read 0.89 / 0.885 / 0.86 on seeds 1-3 with
+    0.3, 0.90 / 0.86 with 0.1, 0.86 / 0.875 with 0.6, and 0.77 on seed 1 with 0.9
+    (docs/results.md, runs Z, AA, AD, AB, AC, P, R, W): short returns carry fewer of the
+    ε-greedy actions' consequences into the targets, while λ > 0 still moves a win's +20
+    back faster."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
     eval_ema: float = 0.0

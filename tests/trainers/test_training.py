@@ -17,7 +17,7 @@ import pytest
 import ray
 import torch
 
-from neuronsmae.trainers.buffer import Episode
+from neuronsmae.trainers.buffer import Batch, Episode
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
@@ -199,7 +199,7 @@ def test_no_validation_once_the_wall_clock_budget_is_spent(tmp_path: Path) -> No
     trainer = Trainer(cfg)
     train = trainer.learner.train
 
-    def expiring(batch):  # type: ignore[no-untyped-def]
+    def expiring(batch: Batch) -> dict[str, float]:
         trainer.session_start -= 3600.0  # the ten minutes run out during the first update
         return train(batch)
 
