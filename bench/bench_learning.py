@@ -108,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         "best": best,
         "curve": result["evals"],
         "counters": result["counters"],
+        "start_replays": result["start_replays"],
         "total_seconds": total,
         "target": {"win_rate": 0.9, "minutes": 30},
         "machine": {

@@ -69,12 +69,14 @@ def save_checkpoint(
     counters: Counters,
     np_rng: np.random.Generator,
     selection: dict[str, Any] | None = None,
+    starts: dict[str, Any] | None = None,
 ) -> None:
     """Write the checkpoint atomically (temporary file, then rename).
 
     ``learner_state`` is ``QLearner.state_dict()``: its :func:`policy_key` entry is what
     acting needs.
     ``selection`` is the evaluation that chose these weights (for ``best.pt``).
+    ``starts`` is the start replay's state (``StartReplay.state_dict()``), for ``--resume``.
     """
     payload = {
         "format": FORMAT,
@@ -84,6 +86,7 @@ def save_checkpoint(
         "learner": learner_state,
         "counters": asdict(counters),
         "selection": selection,
+        "starts": starts,
         "rng": {
             "torch": torch.get_rng_state(),
             "numpy": np_rng.bit_generator.state,

@@ -123,6 +123,15 @@ class TrainConfig:
     """Final exploration ε (paper: 0.05)."""
     eps_anneal_episodes: int = 1500
     """Training episodes over which ε falls linearly from eps_start to eps_end."""
+    start_replay: float = 0.0
+    """Probability that a training episode replays a recent start the team did not win
+    instead of a fresh seed (0: never, the paper's uniform starts); see trainers/starts.py.
+    Why: the agents lose mostly the starts they already judge bad, and uniform seeds give
+    those starts only their small share of the data."""
+    start_replay_plays: int = 3
+    """A lost start is played at most this many times in all, so unwinnable starts leave."""
+    start_replay_capacity: int = 256
+    """Lost starts kept for replay, the most recent ones (the queue follows the policy)."""
     target_update_interval: int = 100
     """Gradient updates between hard target refreshes (100 = every 50 episodes at the default
     2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100 episodes).
@@ -266,6 +275,14 @@ class TrainConfig:
             raise ConfigError(
                 f"priority_alpha must be ≥ 0 (0 = uniform) and priority_beta in [0, 1], got "
                 f"{self.priority_alpha} and {self.priority_beta}"
+            )
+        if not 0.0 <= self.start_replay <= 1.0:
+            raise ConfigError(f"start_replay must lie in [0, 1] (0 = off), got {self.start_replay}")
+        if self.start_replay_plays < 2 or self.start_replay_capacity < 1:
+            raise ConfigError(
+                "start_replay_plays must be ≥ 2 (a first play and a replay) and "
+                f"start_replay_capacity ≥ 1, got {self.start_replay_plays} and "
+                f"{self.start_replay_capacity}"
             )
         if not 0.0 <= self.eval_ema < 1.0:
             raise ConfigError(f"eval_ema must lie in [0, 1) (0 = off), got {self.eval_ema}")

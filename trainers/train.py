@@ -51,6 +51,7 @@ from neuronsmae.trainers.placement import sampler_placement
 from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy
 from neuronsmae.trainers.sampler import Request, Sampler
+from neuronsmae.trainers.starts import StartReplay
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
 
 TEST_SEED_OFFSET = 10_000_000
@@ -77,6 +78,9 @@ class Trainer:
         self.run_dir = cfg.run_dir
         self.counters = Counters()
         self.np_rng = np.random.default_rng(cfg.seed)
+        self.starts = StartReplay(
+            cfg.start_replay, cfg.start_replay_plays, cfg.start_replay_capacity, cfg.seed
+        )
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.torch_threads)
@@ -166,6 +170,8 @@ class Trainer:
         self.learner.load_state_dict(payload["learner"])
         self.counters = Counters(**payload["counters"])
         restore_rng(payload["rng"], self.np_rng)
+        if payload.get("starts") is not None:
+            self.starts.load_state_dict(payload["starts"])
         best = self.run_dir / BEST_NAME
         if self.cfg.keep_best and best.is_file():
             chosen = load_checkpoint(best)
@@ -204,6 +210,7 @@ class Trainer:
             "best": best,
             "evals": self.evals,
             "counters": asdict(self.counters),
+            "start_replays": self.starts.replays,
             "run_dir": str(self.run_dir),
         }
 
@@ -239,7 +246,7 @@ class Trainer:
     def _request(self, k: int) -> Request:
         cfg = self.cfg
         eps = epsilon_at(k, cfg.eps_start, cfg.eps_end, cfg.eps_anneal_episodes)
-        return Request(train_seed(cfg.seed, k, cfg.eval_seed), eps)
+        return Request(self.starts.choose(train_seed(cfg.seed, k, cfg.eval_seed)), eps)
 
     def _absorb(self, episodes: list[Episode]) -> None:
         """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
@@ -248,6 +255,7 @@ class Trainer:
         for episode in episodes:
             self.buffer.add(episode)
             self.stored_seeds.append(episode.info["seed"])
+            self.starts.record(episode.info["seed"], episode.info.get("winner") == "blue")
             self.recent.append(episode)
             c.episodes += 1
             c.env_steps += episode.length
@@ -305,6 +313,7 @@ class Trainer:
             "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
             "train_return": summarize(recent)["mean_return"] if recent else 0.0,
             "env_steps_per_s": self.session_steps / elapsed,
+            "start_replays": self.starts.replays,
             **self.last_stats,
         }
 
@@ -379,6 +388,7 @@ class Trainer:
             learner_state=self.learner.state_dict(),
             counters=self.counters,
             np_rng=self.np_rng,
+            starts=self.starts.state_dict(),
         )
 
 

@@ -118,6 +118,7 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "augment": "enemies,field,allies",
             "ally_action_input": True,
             "priority_alpha": 0.6,
+            "start_replay": 1.0,
         },
     )
     trainer = Trainer(cfg)
@@ -135,6 +136,18 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     # replayed episodes carry their TD errors as priorities (new ones start at 1)
     priorities = trainer.buffer.priorities[: len(trainer.buffer)]
     assert (priorities != 1.0).any() and trainer.buffer.max_priority >= priorities.max()
+    # p = 1: the second iteration replays the first iteration's starts not won (each once,
+    # never both at once) and plays fresh seeds only for the rest
+    first = {e.info["seed"]: e.info["winner"] == "blue" for e in list(trainer.recent)[:2]}
+    lost = sorted(seed for seed, won in first.items() if not won)
+    assert lost  # the untrained agents lose a start of the first iteration: replay is exercised
+    second = trainer.stored_seeds[2:]
+    assert sorted(s for s in second if s in first) == lost
+    fresh = [train_seed(cfg.seed, k, cfg.eval_seed) for k in range(4)]
+    assert all(s in first or s in fresh[2:] for s in second)
+    assert result["start_replays"] == len(lost) and set(fresh[:2]) == set(first)
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)["starts"]
+    assert saved["replays"] == len(lost) and len(saved["seeds"]) == len(saved["plays"])
 
 
 @pytest.mark.parametrize("eval_ema", [0.0, 0.5])
