@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from neuronsmae.trainers.config import LEVELS, make_config, parse_overrides
+from neuronsmae.trainers.config import LEVELS, TrainConfig, make_config, parse_overrides
 from neuronsmae.trainers.mixers import ALGORITHMS
 from neuronsmae.trainers.train import train
 
@@ -36,10 +36,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--level", choices=LEVELS, default="easy")
     p.add_argument("--minutes", type=float, default=30.0, help="wall-clock training budget")
     p.add_argument("--episodes", type=int, default=1_000_000, help="episode cap")
-    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--workers", type=int, default=2)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--eval-every", type=int, default=500, help="episodes between evaluations")
-    p.add_argument("--eval-episodes", type=int, default=40)
+    p.add_argument("--eval-episodes", type=int, default=50)
     p.add_argument("--final-eval", type=int, default=200, help="episodes of the final eval")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--out", type=Path, default=OUT)
@@ -60,12 +60,9 @@ def print_table(evals: list[dict[str, Any]]) -> None:
         )
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the benchmark and write its JSON report."""
-    args = parse_args(argv)
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    run_dir = Path("runs") / f"bench_{args.alg}_{args.level}_{stamp}"
-    cfg = make_config(
+def bench_config(args: argparse.Namespace, run_dir: Path) -> TrainConfig:
+    """The training configuration of one benchmark run."""
+    return make_config(
         {
             "alg": args.alg,
             "level": args.level,
@@ -81,6 +78,13 @@ def main(argv: list[str] | None = None) -> int:
         },
         parse_overrides(args.set),
     )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and write its JSON report."""
+    args = parse_args(argv)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    cfg = bench_config(args, Path("runs") / f"bench_{args.alg}_{args.level}_{stamp}")
     start = time.perf_counter()
     result = train(cfg)
     total = time.perf_counter() - start

@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="neuronsmae-train", description=summary)
     p.add_argument("--alg", choices=sorted(ALGORITHMS), help="learning algorithm (mixer)")
     p.add_argument("--level", choices=LEVELS, help="opponent bot level")
-    p.add_argument("--workers", type=int, help="rollout workers (default: cores - 1)")
+    p.add_argument("--workers", type=int, help="rollout workers (default: cores - 1, at least 2)")
     p.add_argument("--episodes", type=int, help="training episodes in total")
     p.add_argument("--out", help="run directory (default runs/<alg>_<level>_s<seed>)")
     p.add_argument("--seed", type=int, help="run seed")

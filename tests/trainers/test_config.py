@@ -115,3 +115,33 @@ def test_learning_rate_schedule_is_linear_over_the_budget_and_off_by_default() -
 def test_importance_weight_exponent_rises_to_one_over_the_budget() -> None:
     cfg = TrainConfig(priority_alpha=0.6, priority_beta=0.4)
     assert [cfg.beta_at(p) for p in (0.0, 0.5, 1.0, 2.0)] == pytest.approx([0.4, 0.7, 1.0, 1.0])
+
+
+def test_the_readme_main_job_is_the_target_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``neuronsmae-train --alg vdn --level easy`` trains exactly as the benchmark's target run
+    (``bench/bench_learning.py`` with its defaults: 30 minutes, two workers, validation every
+    500 episodes on 50, a 200-episode test), so the README's figure is what a user gets."""
+    from bench.bench_learning import bench_config
+    from bench.bench_learning import parse_args as bench_args
+
+    main_job = config_from_args(build_parser().parse_args(["--alg", "vdn", "--level", "easy"]))
+    target = bench_config(bench_args([]), Path("runs/x"))
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    assert main_job.n_workers() == target.n_workers() == 2
+    assert main_job.episodes >= 20_000  # never the binding budget in 30 minutes on 2 cores
+    ignored = {"out", "progress", "episodes", "workers"}
+    differ = {
+        k: (v, target.to_dict()[k])
+        for k, v in main_job.to_dict().items()
+        if k not in ignored and v != target.to_dict()[k]
+    }
+    assert differ == {}
+
+
+@pytest.mark.parametrize(("cores", "workers"), [(1, 2), (2, 2), (4, 3), (24, 23)])
+def test_default_workers_are_cores_less_one_and_at_least_two(
+    monkeypatch: pytest.MonkeyPatch, cores: int, workers: int
+) -> None:
+    monkeypatch.setattr("os.cpu_count", lambda: cores)
+    assert make_config({}).n_workers() == workers
+    assert make_config({"workers": 5}).n_workers() == 5
