@@ -313,7 +313,6 @@ class Trainer:
             "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
             "train_return": summarize(recent)["mean_return"] if recent else 0.0,
             "env_steps_per_s": self.session_steps / elapsed,
-            "start_replays": self.starts.replays,
             **self.last_stats,
         }
 
