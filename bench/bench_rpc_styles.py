@@ -29,8 +29,8 @@ import numpy as np
 import psutil
 import zenoh
 
-from bench.bench_transport import free_port, play
-from bench.common import machine, table, write_json
+from bench.bench_transport import play
+from bench.common import free_port, machine, table, write_json
 from neuronsmae.protocol.messages import (
     Configure,
     OkReply,

@@ -8,7 +8,10 @@ alternating in-process and remote rounds so load from other processes on the mac
 both alike; the median round rate of each is reported, and the median of the paired
 (remote / in-process) round ratios. The server is launched by ``RM`` on a
 free loopback port with ``time_scale=0`` (unpaced). Also measures the round trip of a
-``ping`` (median and p99). Prints a Markdown table and writes bench/out/transport.json.
+``ping`` (median and p99), and the floor of any query (``bench.zenoh_floor``: a bare Zenoh
+query and a bare TCP socket, nothing of NeuronsMAE in either), from which ``bound_ratio``
+is the ratio a free server and client would reach. Prints a Markdown table and writes
+bench/out/transport.json.
 
 Per-thread CPU time per decision (client and server, main thread and the rest) shows where
 the Zenoh path's extra cost lands: the server's main thread runs the arena and the codec,
@@ -23,7 +26,6 @@ Zenoh) measure the transport's real cost whatever else runs.
 from __future__ import annotations
 
 import argparse
-import socket
 import statistics
 import time
 from typing import Any
@@ -31,7 +33,8 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import machine, table, write_json
+from bench.common import free_port, machine, table, write_json
+from bench.zenoh_floor import measure as measure_floor
 from neuronsmae.client import RM
 from neuronsmae.client.link import Link
 from neuronsmae.protocol.interface import ArenaAPI
@@ -43,12 +46,6 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "continuous 2v2": {"action_space": "continuous", "n_blue": 2, "n_red": 2},
 }
 TARGET = 0.85
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def cpu_seconds(procs: list[psutil.Process]) -> float:
@@ -177,6 +174,13 @@ def ping_rtt(pings: int) -> dict[str, float]:
     }
 
 
+def bound(in_process_per_s: float, floor_us: float) -> float:
+    """The highest ratio one Zenoh query per decision allows, were the server and the
+    client free: an in-process decision against itself plus a bare query's round trip."""
+    decision_us = 1e6 / in_process_per_s
+    return round(decision_us / (decision_us + floor_us), 3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--decisions", type=int, default=150)
@@ -185,6 +189,9 @@ def main() -> None:
     args = parser.parse_args()
     results = [compare(n, o, args.decisions, args.rounds) for n, o in CONFIGS.items()]
     rtt = ping_rtt(args.pings)
+    floor = measure_floor(args.pings)
+    for r in results:
+        r["bound_ratio"] = bound(r["in_process_decisions_per_s"], floor[0]["median_us"])
     columns = [
         "config",
         "in_process_decisions_per_s",
@@ -193,6 +200,7 @@ def main() -> None:
         "in_process_decisions_per_cpu_s",
         "zenoh_decisions_per_cpu_s",
         "cpu_ratio",
+        "bound_ratio",
     ]
     print(table(results, columns))
     cpu_rows = [
@@ -205,12 +213,15 @@ def main() -> None:
     print(table(cpu_rows, ["config", "path", *parts]))
     print(f"target: zenoh ≥ {TARGET:.0%} of in-process")
     print(f"ping round trip: median {rtt['median_us']:.0f} µs, p99 {rtt['p99_us']:.0f} µs")
+    print("the floor, bare round trips without NeuronsMAE (bound_ratio uses Zenoh's median):")
+    print(table(floor, ["path", "pings", "median_us", "p99_us"]))
     report = {
         "decisions_per_round": args.decisions,
         "rounds": args.rounds,
         "target_ratio": TARGET,
         "results": results,
         "ping": rtt,
+        "floor": floor,
         "machine": machine(),
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }

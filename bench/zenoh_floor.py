@@ -1,0 +1,170 @@
+"""The transport's floor: the round trip of a bare Zenoh query, and of a bare TCP socket.
+
+    python -m bench.zenoh_floor [--pings 3000]
+
+Why: ``bench_transport`` compares ``RM`` with the in-process ``Arena``, and every decision
+over ``RM`` is one Zenoh query. A query's round trip with nothing of NeuronsMAE in it (no
+codec, no arena, a one-byte reply from a process that does nothing else, the same session
+settings as ``protocol.transport``) is a cost no change to this project can remove, so it
+bounds the ratio: ``in_process_us / (in_process_us + floor_us)`` even if the server and
+client cost nothing. The same exchange over a plain TCP socket between two Python
+processes shows how much of the floor is the operating system's and how much Zenoh's.
+
+Prints a Markdown table and writes bench/out/zenoh_floor.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import zenoh
+
+from bench.common import free_port, machine, table, write_json
+from neuronsmae.protocol.transport import client_config, server_config
+
+KEY = "bench/floor"
+READY_S = 20.0
+REPO = Path(__file__).resolve().parents[1]
+
+
+def serve_zenoh(port: int) -> None:
+    """Answer every query on ``KEY`` with one byte, until killed."""
+    session = zenoh.open(server_config("127.0.0.1", port))
+    try:
+        queryable = session.declare_queryable(KEY)
+        while True:
+            with queryable.recv() as query:
+                query.reply(KEY, b"x", express=True)
+    finally:
+        session.close()
+
+
+def serve_tcp(port: int) -> None:
+    """Echo one byte for every message of the first connection, until it closes."""
+    with socket.create_server(("127.0.0.1", port)) as server:
+        conn, _ = server.accept()
+        with conn:
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            while conn.recv(64):
+                conn.sendall(b"x")
+
+
+SERVERS: dict[str, Callable[[int], None]] = {"zenoh": serve_zenoh, "tcp": serve_tcp}
+
+
+@contextlib.contextmanager
+def spawned(kind: str, port: int) -> Iterator[subprocess.Popen[bytes]]:
+    """A fresh process (never a fork of one holding a Zenoh session) serving ``kind``."""
+    cmd = [sys.executable, "-m", "bench.zenoh_floor", "--serve", kind, "--port", str(port)]
+    proc = subprocess.Popen(cmd, cwd=REPO)
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _until_ready(connect: Callable[[], object]) -> object:
+    deadline = time.monotonic() + READY_S
+    while True:
+        try:
+            return connect()
+        except (zenoh.ZError, OSError):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
+def _stats(kind: str, times: list[float]) -> dict[str, object]:
+    times = sorted(times)
+    return {
+        "path": kind,
+        "pings": len(times),
+        "median_us": round(statistics.median(times) * 1e6, 1),
+        "p99_us": round(times[int(0.99 * (len(times) - 1))] * 1e6, 1),
+    }
+
+
+def _timed(call: Callable[[], object], pings: int, warm: int = 200) -> list[float]:
+    for _ in range(warm):
+        call()
+    times = []
+    for _ in range(pings):
+        start = time.perf_counter()
+        call()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def zenoh_rtt(pings: int) -> dict[str, object]:
+    """Round trips of a one-byte query through the project's own session settings."""
+    port = free_port()
+    with spawned("zenoh", port):
+        session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
+        assert isinstance(session, zenoh.Session)
+        try:
+            querier = session.declare_querier(
+                KEY, timeout=5.0, consolidation=zenoh.ConsolidationMode.NONE, express=True
+            )
+
+            def call() -> None:
+                replies = list(querier.get(payload=b"p"))
+                if not replies or replies[0].ok is None:  # the server is still declaring
+                    raise RuntimeError("no reply from the echo server")
+
+            _until_ready(lambda: call() or True)
+            return _stats("zenoh query", _timed(call, pings))
+        finally:
+            session.close()
+
+
+def tcp_rtt(pings: int) -> dict[str, object]:
+    """Round trips of one byte over a loopback TCP socket between two Python processes."""
+    port = free_port()
+    with spawned("tcp", port):
+        conn = _until_ready(lambda: socket.create_connection(("127.0.0.1", port)))
+        assert isinstance(conn, socket.socket)
+        with conn:
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+            def call() -> None:
+                conn.sendall(b"p")
+                if not conn.recv(64):
+                    raise RuntimeError("the echo server closed the connection")
+
+            return _stats("tcp socket", _timed(call, pings))
+
+
+def measure(pings: int) -> list[dict[str, object]]:
+    """Both floors, Zenoh first."""
+    return [zenoh_rtt(pings), tcp_rtt(pings)]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--pings", type=int, default=3000)
+    parser.add_argument("--serve", choices=sorted(SERVERS), help=argparse.SUPPRESS)
+    parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.serve:
+        # SIGTERM as SystemExit, so the server's ``finally`` closes its session.
+        signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+        SERVERS[args.serve](args.port)
+        return
+    rows = measure(args.pings)
+    print(table(rows, ["path", "pings", "median_us", "p99_us"]))
+    report = {"results": rows, "machine": machine(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    print(f"wrote {write_json('zenoh_floor', report)}")
+
+
+if __name__ == "__main__":
+    main()
