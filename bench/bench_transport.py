@@ -13,6 +13,9 @@ query and a bare TCP socket, nothing of NeuronsMAE in either), from which ``boun
 is the ratio a free server and client would reach. Prints a Markdown table and writes
 bench/out/transport.json.
 
+``--busy-poll-us`` adds rows for servers that poll for their next request that long after
+each reply (``neuronsmae-server --busy-poll``) instead of sleeping at once.
+
 Per-thread CPU time per decision (client and server, main thread and the rest) shows where
 the Zenoh path's extra cost lands: the server's main thread runs the arena and the codec,
 the other threads are mostly Zenoh's runtime.
@@ -104,11 +107,13 @@ def _summary(local: list[float], remote: list[float]) -> tuple[float, float, flo
     return statistics.median(local), statistics.median(remote), statistics.median(ratios)
 
 
-def compare(name: str, options: dict[str, Any], decisions: int, rounds: int) -> dict[str, Any]:
+def compare(
+    name: str, options: dict[str, Any], decisions: int, rounds: int, busy_poll_us: float = 0.0
+) -> dict[str, Any]:
     continuous = options["action_space"] == "continuous"
     port = free_port()
     local = Arena(seed=1, **options)
-    remote = RM(seed=1, port=port, time_scale=0, **options)
+    remote = RM(seed=1, port=port, time_scale=0, busy_poll_us=busy_poll_us, **options)
     me = [psutil.Process()]
     both = [*me, launched_server(port)]
     try:
@@ -130,6 +135,7 @@ def compare(name: str, options: dict[str, Any], decisions: int, rounds: int) -> 
     cpu = _summary(*([c for _, c in runs[k]] for k in ("in_process", "zenoh")))
     return {
         "config": name,
+        "busy_poll_us": busy_poll_us,
         "options": options,
         "in_process_decisions_per_s": round(wall[0], 1),
         "zenoh_decisions_per_s": round(wall[1], 1),
@@ -186,14 +192,28 @@ def main() -> None:
     parser.add_argument("--decisions", type=int, default=150)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--pings", type=int, default=2000)
+    parser.add_argument(
+        "--busy-poll-us",
+        type=float,
+        nargs="*",
+        default=[2000.0],
+        help="also measure servers that poll this many µs for the next request (2000); "
+        "the plain server (0) is always measured",
+    )
     args = parser.parse_args()
-    results = [compare(n, o, args.decisions, args.rounds) for n, o in CONFIGS.items()]
+    results = [
+        compare(n, o, args.decisions, args.rounds, busy)
+        for busy in [0.0, *args.busy_poll_us]
+        for n, o in CONFIGS.items()
+    ]
     rtt = ping_rtt(args.pings)
     floor = measure_floor(args.pings)
-    for r in results:
-        r["bound_ratio"] = bound(r["in_process_decisions_per_s"], floor[0]["median_us"])
+    for r in results:  # floor[1] is a polling server's, for the busy-poll rows
+        floor_us = floor[1 if r["busy_poll_us"] else 0]["median_us"]
+        r["bound_ratio"] = bound(r["in_process_decisions_per_s"], floor_us)
     columns = [
         "config",
+        "busy_poll_us",
         "in_process_decisions_per_s",
         "zenoh_decisions_per_s",
         "ratio",
@@ -204,16 +224,21 @@ def main() -> None:
     ]
     print(table(results, columns))
     cpu_rows = [
-        {"config": r["config"], "path": side, **r["cpu_us_per_decision"][side]}
+        {
+            "config": r["config"],
+            "busy_poll_us": r["busy_poll_us"],
+            "path": side,
+            **r["cpu_us_per_decision"][side],
+        }
         for r in results
         for side in ("in_process", "zenoh")
     ]
     print("CPU µs per decision by thread (main = the arena's or the client loop's):")
     parts = ["client_main", "client_other", "server_main", "server_other"]
-    print(table(cpu_rows, ["config", "path", *parts]))
+    print(table(cpu_rows, ["config", "busy_poll_us", "path", *parts]))
     print(f"target: zenoh ≥ {TARGET:.0%} of in-process")
     print(f"ping round trip: median {rtt['median_us']:.0f} µs, p99 {rtt['p99_us']:.0f} µs")
-    print("the floor, bare round trips without NeuronsMAE (bound_ratio uses Zenoh's median):")
+    print("the floor, bare round trips without NeuronsMAE (bound_ratio uses the queries'):")
     print(table(floor, ["path", "pings", "median_us", "p99_us"]))
     report = {
         "decisions_per_round": args.decisions,

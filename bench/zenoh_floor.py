@@ -7,8 +7,9 @@ over ``RM`` is one Zenoh query. A query's round trip with nothing of NeuronsMAE 
 codec, no arena, a one-byte reply from a process that does nothing else, the same session
 settings as ``protocol.transport``) is a cost no change to this project can remove, so it
 bounds the ratio: ``in_process_us / (in_process_us + floor_us)`` even if the server and
-client cost nothing. The same exchange over a plain TCP socket between two Python
-processes shows how much of the floor is the operating system's and how much Zenoh's.
+client cost nothing. The same exchange as a publication answered by a publication (Zenoh's
+other request pattern), and over a plain TCP socket between two Python processes, shows how
+much of the floor is the pattern's, Zenoh's and the operating system's.
 
 Prints a Markdown table and writes bench/out/zenoh_floor.json.
 """
@@ -36,14 +37,34 @@ READY_S = 20.0
 REPO = Path(__file__).resolve().parents[1]
 
 
-def serve_zenoh(port: int) -> None:
-    """Answer every query on ``KEY`` with one byte, until killed."""
+def serve_zenoh(port: int, busy_poll_s: float = 0.0) -> None:
+    """Answer every query on ``KEY`` with one byte, until killed; poll ``busy_poll_s`` for
+    the next query before blocking, as ``neuronsmae-server --busy-poll`` does."""
     session = zenoh.open(server_config("127.0.0.1", port))
     try:
         queryable = session.declare_queryable(KEY)
         while True:
-            with queryable.recv() as query:
+            query = None
+            deadline = time.perf_counter() + busy_poll_s
+            while query is None and time.perf_counter() < deadline:
+                query = queryable.try_recv()
+            if query is None:
+                query = queryable.recv()
+            with query:
                 query.reply(KEY, b"x", express=True)
+    finally:
+        session.close()
+
+
+def serve_pubsub(port: int) -> None:
+    """Publish one byte on ``KEY/rep`` for every sample on ``KEY/req``, until killed."""
+    session = zenoh.open(server_config("127.0.0.1", port))
+    try:
+        publisher = session.declare_publisher(f"{KEY}/rep", express=True)
+        subscriber = session.declare_subscriber(f"{KEY}/req")
+        while True:
+            subscriber.recv()
+            publisher.put(b"x")
     finally:
         session.close()
 
@@ -58,7 +79,14 @@ def serve_tcp(port: int) -> None:
                 conn.sendall(b"x")
 
 
-SERVERS: dict[str, Callable[[int], None]] = {"zenoh": serve_zenoh, "tcp": serve_tcp}
+POLL_S = 2e-3
+"""How long the polling echo server polls: as ``bench_transport``'s default busy poll."""
+SERVERS: dict[str, Callable[[int], None]] = {
+    "zenoh": serve_zenoh,
+    "zenoh-poll": lambda port: serve_zenoh(port, POLL_S),
+    "pubsub": serve_pubsub,
+    "tcp": serve_tcp,
+}
 
 
 @contextlib.contextmanager
@@ -105,10 +133,11 @@ def _timed(call: Callable[[], object], pings: int, warm: int = 200) -> list[floa
     return times
 
 
-def zenoh_rtt(pings: int) -> dict[str, object]:
-    """Round trips of a one-byte query through the project's own session settings."""
+def zenoh_rtt(pings: int, poll: bool = False) -> dict[str, object]:
+    """Round trips of a one-byte query through the project's own session settings, to a
+    server that sleeps until a query comes or (``poll``) polls for it first."""
     port = free_port()
-    with spawned("zenoh", port):
+    with spawned("zenoh-poll" if poll else "zenoh", port):
         session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
         assert isinstance(session, zenoh.Session)
         try:
@@ -122,7 +151,37 @@ def zenoh_rtt(pings: int) -> dict[str, object]:
                     raise RuntimeError("no reply from the echo server")
 
             _until_ready(lambda: call() or True)
-            return _stats("zenoh query", _timed(call, pings))
+            name = "zenoh query, server polling" if poll else "zenoh query"
+            return _stats(name, _timed(call, pings))
+        finally:
+            session.close()
+
+
+def pubsub_rtt(pings: int) -> dict[str, object]:
+    """Round trips of one byte published to the echo server and published back: Zenoh's
+    other request pattern (``bench_rpc_styles`` compares both with the real service)."""
+    port = free_port()
+    with spawned("pubsub", port):
+        session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
+        assert isinstance(session, zenoh.Session)
+        try:
+            publisher = session.declare_publisher(f"{KEY}/req", express=True)
+            subscriber = session.declare_subscriber(f"{KEY}/rep")
+            deadline = time.monotonic() + READY_S
+            while subscriber.try_recv() is None:  # until both declarations have met
+                if time.monotonic() > deadline:
+                    raise RuntimeError("no reply from the echo server")
+                publisher.put(b"p")
+                time.sleep(0.05)
+            time.sleep(0.2)
+            while subscriber.try_recv() is not None:  # replies to the probes above
+                pass
+
+            def call() -> None:
+                publisher.put(b"p")
+                subscriber.recv()
+
+            return _stats("zenoh publish/subscribe", _timed(call, pings))
         finally:
             session.close()
 
@@ -145,8 +204,9 @@ def tcp_rtt(pings: int) -> dict[str, object]:
 
 
 def measure(pings: int) -> list[dict[str, object]]:
-    """Both floors, Zenoh first."""
-    return [zenoh_rtt(pings), tcp_rtt(pings)]
+    """Every floor: first a query (what ``RM`` sends) to a sleeping and to a polling server,
+    the ones ``bench_transport``'s bounds use."""
+    return [zenoh_rtt(pings), zenoh_rtt(pings, poll=True), pubsub_rtt(pings), tcp_rtt(pings)]
 
 
 def main() -> None:

@@ -18,7 +18,8 @@ import tempfile
 import time
 from collections.abc import Callable
 
-from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 
 STARTUP_TIMEOUT = 120.0
 """Seconds a launched server may take to answer (imports, JIT compiles, arena build)."""
@@ -35,12 +36,29 @@ def is_local(host: str) -> bool:
         return False
 
 
+def check_launch(time_scale: float, busy_poll_us: float) -> None:
+    """Refuse settings the server would exit on, before starting it, naming what is valid."""
+    if not time_scale >= 0:  # also refuses NaN
+        raise InvalidOptionError(f"time_scale must be >= 0 (0 = unlimited), got {time_scale!r}")
+    if not 0 <= busy_poll_us <= MAX_BUSY_POLL_US:
+        raise InvalidOptionError(
+            f"busy_poll_us must be in [0, {MAX_BUSY_POLL_US:g}] microseconds, got {busy_poll_us!r}"
+        )
+
+
 class ServerProcess:
     """A server launched as a subprocess, with its stderr kept in a temporary log file."""
 
     def __init__(
-        self, port: int, seed: int, host: str, time_scale: float, no_graphics: bool
+        self,
+        port: int,
+        seed: int,
+        host: str,
+        time_scale: float,
+        no_graphics: bool,
+        busy_poll_us: float = 0.0,
     ) -> None:
+        check_launch(time_scale, busy_poll_us)
         self.port = port
         self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in stop)
             prefix=f"neuronsmae-server-{port}-", suffix=".log", delete=False
@@ -49,6 +67,7 @@ class ServerProcess:
             sys.executable, "-m", "neuronsmae.server",
             "--port", str(port), "--seed", str(seed), "--host", host,
             "--time-scale", str(time_scale), "--watch-parent", str(os.getpid()),
+            "--busy-poll", str(busy_poll_us),
         ]  # fmt: skip
         if no_graphics:
             cmd.append("--no-graphics")

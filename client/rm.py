@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.client.launcher import ServerProcess, is_local
+from neuronsmae.client.launcher import ServerProcess, check_launch, is_local
 from neuronsmae.client.link import Link
 from neuronsmae.protocol.errors import (
     InvalidActionError,
@@ -71,10 +71,15 @@ class RM(ArenaAPI):
     ``seed`` and ``**options`` (the ``Arena`` options: ``action_space``, ``n_blue``, ...)
     configure the server's arena exactly as ``Arena(seed, **options)`` would. With
     ``launch=True`` and nothing listening on a local ``host:port``, a server is started
-    there (with ``time_scale`` and ``no_graphics``, which only apply to a server launched
-    this way) and stopped by :meth:`close`. Every request waits at most ``timeout``
-    seconds, then raises ``ServerUnavailableError``; if the server comes back, the next
-    request configures it again and carries on (the episode in progress is lost).
+    there (with ``time_scale``, ``no_graphics`` and ``busy_poll_us``, which only apply to a
+    server launched this way) and stopped by :meth:`close`. Every request waits at most
+    ``timeout`` seconds, then raises ``ServerUnavailableError``; if the server comes back,
+    the next request configures it again and carries on (the episode in progress is lost).
+
+    ``busy_poll_us`` (``neuronsmae-server --busy-poll``) has the launched server poll for
+    the next request that many microseconds after each reply instead of sleeping at once.
+    With a core to spare it cuts the round trip (``docs/benchmarks.md``); where servers
+    share cores it only burns CPU, so it is off by default.
 
     ``router`` (a Zenoh locator such as ``"tcp/10.0.0.1:7447"``) reaches the server on
     ``port`` through that router instead of at ``host``: for servers started with
@@ -91,8 +96,10 @@ class RM(ArenaAPI):
         launch: bool = True,
         timeout: float = 10.0,
         router: str | None = None,
+        busy_poll_us: float = 0.0,
         **options: Any,
     ) -> None:
+        check_launch(time_scale, busy_poll_us)
         self.seed, self.port, self.host, self.timeout = seed, port, host, float(timeout)
         self.router = router
         self.options = dict(options)
@@ -103,7 +110,7 @@ class RM(ArenaAPI):
         self._cache: dict[str, Any] = {}
         """What the last reset/step left: obs, state, avail_actions (private copies)."""
         try:
-            self._connect(launch, no_graphics, time_scale)
+            self._connect(launch, no_graphics, time_scale, busy_poll_us)
             farewell = encode_request(Close(), self.session_id)
             self._closer = weakref.finalize(self, _shutdown, self._link, self._server, farewell)
             self._configure()
@@ -113,7 +120,9 @@ class RM(ArenaAPI):
 
     # ---- connection --------------------------------------------------------------------
 
-    def _connect(self, launch: bool, no_graphics: bool, time_scale: float) -> None:
+    def _connect(
+        self, launch: bool, no_graphics: bool, time_scale: float, busy_poll_us: float
+    ) -> None:
         if self._link.open():
             return
         where = self._link.where
@@ -125,7 +134,9 @@ class RM(ArenaAPI):
             raise ServerUnavailableError(
                 f"no server listens on {where}; servers are only launched on this machine"
             )
-        self._server = ServerProcess(self.port, self.seed, self.host, time_scale, no_graphics)
+        self._server = ServerProcess(
+            self.port, self.seed, self.host, time_scale, no_graphics, busy_poll_us
+        )
         self._server.wait_ready(self._answers)
 
     def _answers(self) -> bool:

@@ -25,6 +25,9 @@ from collections.abc import Sequence
 
 import zenoh
 
+MAX_BUSY_POLL_US = 100_000.0
+"""Longest a server may poll for its next request (``neuronsmae-server --busy-poll``):
+beyond a tenth of a second it is a spinning server, not a fast one."""
 TLS_ENV = "NEURONSMAE_ZENOH_TLS"
 """Environment variable naming a Zenoh JSON5 file whose ``transport.link.tls`` to use."""
 

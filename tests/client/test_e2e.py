@@ -111,6 +111,46 @@ def test_remote_trajectory_equals_in_process(server_a: Server, options: dict[str
             local.close()
 
 
+def test_a_busy_polling_server_plays_the_same_and_stops_promptly(
+    start_server: Callable[..., Server],
+) -> None:
+    server = start_server("--busy-poll", "100000")  # polls 0.1 s after every reply
+    with RM(seed=22, port=server.port, launch=False, timeout=10) as remote:
+        local = Arena(seed=22)
+        try:
+            play_in_lockstep(remote, local, decisions=40)
+        finally:
+            local.close()
+        remote.step([0, 0])
+        t0 = time.monotonic()  # the server is polling for the next request now
+        assert server.stop(signal.SIGTERM) == 0
+    assert time.monotonic() - t0 < 1.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"busy_poll_us": -1.0}, "busy_poll_us"),
+        ({"busy_poll_us": 1e9}, "busy_poll_us"),
+        ({"busy_poll_us": float("nan")}, "busy_poll_us"),
+        ({"time_scale": -1.0}, "time_scale"),
+    ],
+)
+def test_bad_launch_settings_are_refused_before_anything_starts(
+    kwargs: dict[str, float], field: str
+) -> None:
+    with pytest.raises(InvalidOptionError, match=rf"{field} must be") as caught:
+        RM(port=free_port(), **kwargs)
+    assert ">= 0" in str(caught.value) or "[0, 100000]" in str(caught.value)
+
+
+def test_the_server_refuses_a_bad_busy_poll() -> None:
+    cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(free_port())]
+    done = subprocess.run([*cmd, "--busy-poll", "-5"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert "--busy-poll must be in 0..100000 microseconds" in done.stderr
+
+
 def test_rm_keeps_the_interface_and_its_docstrings() -> None:
     for name in ArenaAPI.__abstractmethods__:
         assert getattr(RM, name).__doc__ == getattr(ArenaAPI, name).__doc__
