@@ -31,26 +31,27 @@ import zenoh
 
 from bench.common import free_port, machine, table, write_json
 from neuronsmae.protocol.transport import client_config, server_config
+from neuronsmae.server.rpc import next_query
 
 KEY = "bench/floor"
 READY_S = 20.0
+
+
+class NoReply(RuntimeError):
+    """An echo server did not answer (yet: retried until ``READY_S``)."""
+
+
 REPO = Path(__file__).resolve().parents[1]
 
 
 def serve_zenoh(port: int, busy_poll_s: float = 0.0) -> None:
     """Answer every query on ``KEY`` with one byte, until killed; poll ``busy_poll_s`` for
-    the next query before blocking, as ``neuronsmae-server --busy-poll`` does."""
+    the next query before blocking, exactly as ``neuronsmae-server --busy-poll`` does."""
     session = zenoh.open(server_config("127.0.0.1", port))
     try:
         queryable = session.declare_queryable(KEY)
         while True:
-            query = None
-            deadline = time.perf_counter() + busy_poll_s
-            while query is None and time.perf_counter() < deadline:
-                query = queryable.try_recv()
-            if query is None:
-                query = queryable.recv()
-            with query:
+            with next_query(queryable, busy_poll_s) as query:
                 query.reply(KEY, b"x", express=True)
     finally:
         session.close()
@@ -106,7 +107,7 @@ def _until_ready(connect: Callable[[], object]) -> object:
     while True:
         try:
             return connect()
-        except (zenoh.ZError, OSError):
+        except (zenoh.ZError, OSError, NoReply):
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.05)
@@ -148,7 +149,7 @@ def zenoh_rtt(pings: int, poll: bool = False) -> dict[str, object]:
             def call() -> None:
                 replies = list(querier.get(payload=b"p"))
                 if not replies or replies[0].ok is None:  # the server is still declaring
-                    raise RuntimeError("no reply from the echo server")
+                    raise NoReply("no reply from the echo server")
 
             _until_ready(lambda: call() or True)
             name = "zenoh query, server polling" if poll else "zenoh query"
@@ -170,7 +171,7 @@ def pubsub_rtt(pings: int) -> dict[str, object]:
             deadline = time.monotonic() + READY_S
             while subscriber.try_recv() is None:  # until both declarations have met
                 if time.monotonic() > deadline:
-                    raise RuntimeError("no reply from the echo server")
+                    raise NoReply("no reply from the echo server")
                 publisher.put(b"p")
                 time.sleep(0.05)
             time.sleep(0.2)

@@ -102,6 +102,24 @@ def watch_parent(parent_pid: int, period: float = 0.25) -> None:
     threading.Thread(target=watch, name="watch-parent", daemon=True).start()
 
 
+def next_query(queryable: zenoh.Queryable, busy_poll_s: float = 0.0) -> zenoh.Query:
+    """The next request, polled for up to ``busy_poll_s`` seconds before blocking on it.
+
+    Why poll: a blocked thread on an idle core is woken slowly (on a 2-core VM the request
+    reaches a polling server about 90 µs sooner), and a trainer's next request usually
+    comes within a millisecond of the last reply. The price is a core kept busy for that
+    long after every reply, which only pays when a core is spare: one server per client
+    with cores to spare, not many servers sharing a few cores.
+    """
+    if busy_poll_s > 0:
+        deadline = time.perf_counter() + busy_poll_s
+        while time.perf_counter() < deadline:
+            query = queryable.try_recv()
+            if query is not None:
+                return query
+    return queryable.recv()
+
+
 class RpcServer:
     """Serves an :class:`ArenaService` on ``neuronsmae/<port>/rpc`` at ``tcp/host:port``."""
 
@@ -119,7 +137,7 @@ class RpcServer:
         self.routers = tuple(routers)
         """Zenoh routers to connect to as well, for clients that cannot reach host:port."""
         self.busy_poll_s = busy_poll_s
-        """Seconds to poll for the next request before blocking (see :meth:`_next`)."""
+        """Seconds to poll for the next request before blocking (see :func:`next_query`)."""
         self.key = rpc_key(port)
         self._stop = stop
         self._session: zenoh.Session | None = None
@@ -160,28 +178,11 @@ class RpcServer:
         queryable = self._queryable
         try:
             while not self._stop.requested:
-                query = self._next(queryable)
+                query = next_query(queryable, self.busy_poll_s)
                 with self._stop.critical(), query:
                     self._answer(query)
         except Interrupted:
             pass
-
-    def _next(self, queryable: zenoh.Queryable) -> zenoh.Query:
-        """The next request, polled for up to ``busy_poll_s`` before blocking on it.
-
-        Why poll: a blocked thread on an idle core is woken slowly (on a 2-core VM the
-        request reaches a polling server about 90 µs sooner), and a trainer's next request
-        usually comes within a millisecond of the last reply. The price is a core kept busy
-        for that long after every reply, which only pays when a core is spare: one server
-        per client with cores to spare, not many servers sharing a few cores.
-        """
-        if self.busy_poll_s > 0:
-            deadline = time.perf_counter() + self.busy_poll_s
-            while time.perf_counter() < deadline:
-                query = queryable.try_recv()
-                if query is not None:
-                    return query
-        return queryable.recv()
 
     def _answer(self, query: zenoh.Query) -> None:
         payload = query.payload
