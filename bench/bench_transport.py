@@ -208,9 +208,10 @@ def main() -> None:
     ]
     rtt = ping_rtt(args.pings)
     floor = measure_floor(args.pings)
-    for r in results:  # floor[1] is a polling server's, for the busy-poll rows
-        floor_us = floor[1 if r["busy_poll_us"] else 0]["median_us"]
-        r["bound_ratio"] = bound(r["in_process_decisions_per_s"], floor_us)
+    floor_us = {row["path"]: row["median_us"] for row in floor}
+    for r in results:
+        path = "zenoh query, server polling" if r["busy_poll_us"] else "zenoh query"
+        r["bound_ratio"] = bound(r["in_process_decisions_per_s"], floor_us[path])
     columns = [
         "config",
         "busy_poll_us",

@@ -130,10 +130,11 @@ def test_the_readme_main_job_is_the_target_run(monkeypatch: pytest.MonkeyPatch) 
     assert main_job.n_workers() == target.n_workers() == 2
     assert main_job.episodes >= 20_000  # never the binding budget in 30 minutes on 2 cores
     ignored = {"out", "progress", "episodes", "workers"}
+    wanted = target.to_dict()
     differ = {
-        k: (v, target.to_dict()[k])
+        k: (v, wanted[k])
         for k, v in main_job.to_dict().items()
-        if k not in ignored and v != target.to_dict()[k]
+        if k not in ignored and v != wanted[k]
     }
     assert differ == {}
 
