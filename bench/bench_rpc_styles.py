@@ -2,7 +2,7 @@
 
     python -m bench.bench_rpc_styles [--decisions 200] [--rounds 7]
 
-Serves the real :class:`~neuronsmae.server.service.ArenaService` (abstract 2 v 2) from two
+Serves the real :class:`~neuronsmae.server.serving.service.ArenaService` (abstract 2 v 2) from two
 server processes, one answering Zenoh queries (what ``neuronsmae-server`` does) and one
 answering requests published on a key with replies published on another (the alternative
 the transport issue proposed), and drives both with the same trainer-like loop as
@@ -49,7 +49,7 @@ SESSION = "bench-rpc-styles-0000000000000000"
 def serve(port: int, style: str) -> None:
     """Answer requests on ``port`` in ``style`` until killed (runs in its own process)."""
     from neuronsmae.server.arena import Arena
-    from neuronsmae.server.service import ArenaService
+    from neuronsmae.server.serving.service import ArenaService
 
     with ArenaService(Arena, seed=1) as service:
         session = zenoh.open(server_config("127.0.0.1", port))

@@ -3,7 +3,7 @@
     python -m bench.bench_scaling [--counts 1 2 4 8] [--seconds 8] [--repeats 3]
 
 Starts the largest number of servers once with the fleet supervisor (``neuronsmae-serve``'s
-:class:`~neuronsmae.server.supervisor.Fleet`, unpaced: ``time_scale=0``). For each count
+:class:`~neuronsmae.server.serving.supervisor.Fleet`, unpaced: ``time_scale=0``). For each count
 ``n`` and each repeat, ``n`` client processes (spawned, one per server, like rollout
 workers) open ``RM(port=..., launch=False)`` on the training task (abstract actions,
 cooperative 2 v 2), warm up, meet at a barrier, then play random allowed actions for
@@ -34,7 +34,7 @@ import psutil
 
 from bench.common import machine, table, write_json
 from neuronsmae.client import RM
-from neuronsmae.server.supervisor import Fleet, FleetSpec
+from neuronsmae.server.serving.supervisor import Fleet, FleetSpec
 
 OPTIONS: dict[str, Any] = {
     "action_space": "abstract",

@@ -3,7 +3,7 @@
     python -m bench.faults [--repeats 3] [--skip ray learner]
 
 1. **Server** (``--repeats`` times per case), run under the fleet supervisor
-   (``python -m neuronsmae.server.fleet``, checking every 0.5 s), which restarts it. A
+   (``python -m neuronsmae.server.serving.fleet``, checking every 0.5 s), which restarts it. A
    client (``RM``, timeout 5 s) loses it with SIGKILL:
    * *mid-step*: the server is paced (``--time-scale 1``: a decision lasts 0.4 s) and is
      killed 0.2 s into answering a step;
@@ -59,7 +59,7 @@ class Supervised:
 
     def __init__(self, port: int, time_scale: float, folder: Path) -> None:
         self.port, self.state = port, folder / f"state-{port}.json"
-        cmd = [sys.executable, "-m", "neuronsmae.server.fleet", "--base-port", str(port),
+        cmd = [sys.executable, "-m", "neuronsmae.server.serving.fleet", "--base-port", str(port),
                "--count", "1", "--time-scale", str(time_scale), "--interval", "0.5",
                "--state-file", str(self.state), "--log-dir", str(folder)]  # fmt: skip
         self.log = (folder / f"fleet-{port}.log").open("wb")

@@ -31,7 +31,7 @@ import zenoh
 
 from bench.common import free_port, machine, table, write_json
 from neuronsmae.protocol.transport import client_config, server_config
-from neuronsmae.server.rpc import next_query
+from neuronsmae.server.serving.rpc import next_query
 
 KEY = "bench/floor"
 READY_S = 20.0

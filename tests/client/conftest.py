@@ -21,7 +21,7 @@ from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
 from neuronsmae.protocol.transport import client_config
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.service import warm_up
+from neuronsmae.server.serving.service import warm_up
 
 STARTUP_TIMEOUT = 120.0
 

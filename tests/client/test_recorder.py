@@ -14,7 +14,7 @@ from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.recording import read_recording
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.replay import replay
+from neuronsmae.server.tools.replay import replay
 from tests.client.conftest import free_port, same
 
 

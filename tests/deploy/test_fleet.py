@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from neuronsmae.server.fleet import main, status
-from neuronsmae.server.supervisor import Fleet, FleetSpec, FleetStartError, Member
+from neuronsmae.server.serving.fleet import main, status
+from neuronsmae.server.serving.supervisor import Fleet, FleetSpec, FleetStartError, Member
 
 from .conftest import free_ports, listening, server_cmd, stop, wait_for
 
@@ -37,7 +37,7 @@ def test_serve_restarts_a_killed_server_and_stops_on_sigterm(spawn: Spawn, tmp_p
     base, state = free_ports(2), tmp_path / "state.json"
     args = ["--base-port", str(base), "--count", "2", "--seed", "7", "--time-scale", "0"]
     args += ["--interval", "0.5", "--log-dir", str(tmp_path / "logs"), "--state-file", str(state)]
-    fleet = spawn("-m", "neuronsmae.server.fleet", *args, name="fleet")
+    fleet = spawn("-m", "neuronsmae.server.serving.fleet", *args, name="fleet")
 
     def all_up() -> bool:
         assert fleet.poll() is None, "neuronsmae-serve exited"
@@ -93,7 +93,7 @@ def test_dead_server_restarts_later_each_time(
     crash = [sys.executable, "-c", "import sys; sys.exit(3)"]
     monkeypatch.setattr(fleet, "command", lambda member: crash)
     clock = [1000.0]
-    monkeypatch.setattr("neuronsmae.server.supervisor.time.monotonic", lambda: clock[0])
+    monkeypatch.setattr("neuronsmae.server.serving.supervisor.time.monotonic", lambda: clock[0])
     member: Member = fleet.members[0]
     with fleet:
         fleet._spawn(member)

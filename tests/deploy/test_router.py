@@ -15,9 +15,9 @@ import pytest
 
 from neuronsmae.client import RM
 from neuronsmae.protocol.errors import ServerUnavailableError
-from neuronsmae.server.fleet import status
-from neuronsmae.server.probe import Probe
-from neuronsmae.server.supervisor import FleetSpec
+from neuronsmae.server.serving.fleet import status
+from neuronsmae.server.serving.probe import Probe
+from neuronsmae.server.serving.supervisor import FleetSpec
 
 from .conftest import (
     ROUTER_SCRIPT,

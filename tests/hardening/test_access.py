@@ -24,7 +24,7 @@ import pytest
 import zenoh
 
 from neuronsmae.protocol.transport import client_config, server_config
-from neuronsmae.server import cli
+from neuronsmae.server.serving import cli
 
 from .conftest import Server, free_port
 

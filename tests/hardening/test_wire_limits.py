@@ -25,7 +25,7 @@ from neuronsmae.protocol.messages import (
     decode_reply,
     decode_request,
 )
-from neuronsmae.server.service import ArenaService
+from neuronsmae.server.serving.service import ArenaService
 
 REPO = Path(__file__).resolve().parents[2]
 WIRE_PACKAGES = ("protocol", "server", "client")

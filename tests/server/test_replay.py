@@ -20,8 +20,8 @@ from neuronsmae.protocol.recording import (
     write_recording,
 )
 from neuronsmae.server import Arena
-from neuronsmae.server import match as M
-from neuronsmae.server import replay as R
+from neuronsmae.server.tools import match as M
+from neuronsmae.server.tools import replay as R
 from neuronsmae.server.render import size as render_size
 
 SEED, EPISODE_SEED = 5, 77

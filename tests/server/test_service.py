@@ -27,7 +27,7 @@ from neuronsmae.protocol.messages import (
 )
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
-from neuronsmae.server.service import ArenaService, Pacer
+from neuronsmae.server.serving.service import ArenaService, Pacer
 
 
 class Clock:

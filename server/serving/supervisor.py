@@ -1,6 +1,6 @@
 """The fleet supervisor: N server subprocesses on consecutive ports, pinged and restarted.
 
-Kept apart from the ``neuronsmae-serve`` command line (:mod:`neuronsmae.server.fleet`) so a
+Kept apart from the ``neuronsmae-serve`` command line (:mod:`neuronsmae.server.serving.fleet`) so a
 test or another launcher can drive :class:`Fleet` directly: ``start`` brings the servers
 up, ``check`` is one supervision pass (restart what died, ping what runs), ``stop`` ends
 them all. Servers are fresh interpreters (``python -m neuronsmae.server``), never forks,
@@ -23,8 +23,8 @@ from types import FrameType
 from typing import IO
 
 from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.server.probe import Health, Probe
-from neuronsmae.server.rpc import PortInUseError, check_port
+from neuronsmae.server.serving.probe import Health, Probe
+from neuronsmae.server.serving.rpc import PortInUseError, check_port
 
 log = logging.getLogger("neuronsmae.serve")
 

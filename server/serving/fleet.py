@@ -3,7 +3,7 @@
     neuronsmae-serve --base-port 10000 --count 8 --seed 1 [--host 127.0.0.1]
                      [--time-scale 100] [--router tcp/10.0.0.1:7447] [--interval 2]
     neuronsmae-serve status --base-port 10000 --count 8 [--json]
-    python -m neuronsmae.server.fleet ...   (the same, without the console script)
+    python -m neuronsmae.server.serving.fleet ...   (the same, without the console script)
 
 Server ``i`` listens on ``base_port + i`` with seed ``seed + i``, as a subprocess of its own
 (``python -m neuronsmae.server``), never a fork, because this process holds Zenoh sessions
@@ -29,8 +29,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from neuronsmae.server.probe import Probe
-from neuronsmae.server.supervisor import (
+from neuronsmae.server.serving.probe import Probe
+from neuronsmae.server.serving.supervisor import (
     BAD_ARGUMENTS,
     Fleet,
     FleetSpec,

@@ -32,7 +32,7 @@ from neuronsmae.protocol.errors import (
 )
 from neuronsmae.protocol.recording import Recording, decision_hash, read_recording
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.video import DEFAULT_FPS, check_writable, write_video
+from neuronsmae.server.tools.video import DEFAULT_FPS, check_writable, write_video
 
 
 @dataclass

@@ -33,7 +33,7 @@ from neuronsmae.protocol.recording import (
 )
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.config import LEVEL_NAMES
-from neuronsmae.server.video import write_video
+from neuronsmae.server.tools.video import write_video
 
 Z95 = 1.959963984540054
 

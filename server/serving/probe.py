@@ -1,7 +1,7 @@
 """Ping a server through the protocol's ``ping`` message, from the server package's side.
 
 The server package must not import the client, so this is the few lines of Zenoh the fleet
-launcher (:mod:`neuronsmae.server.fleet`) needs to tell whether a server answers: its own
+launcher (:mod:`neuronsmae.server.serving.fleet`) needs to tell whether a server answers: its own
 client session per server, a timeout on every query, and a :class:`Health` record instead
 of an exception, because for a supervisor "down" is an answer, not an error.
 """

@@ -24,7 +24,7 @@ import zenoh
 from neuronsmae.protocol.errors import MessageTooLargeError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_REQUEST_BYTES, ErrorReply, encode_reply, rpc_key
 from neuronsmae.protocol.transport import endpoint, server_config
-from neuronsmae.server.service import ArenaService
+from neuronsmae.server.serving.service import ArenaService
 
 log = logging.getLogger("neuronsmae.server")
 

@@ -22,7 +22,7 @@ from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
-from neuronsmae.server.rpc import (
+from neuronsmae.server.serving.rpc import (
     Interrupted,
     PortInUseError,
     RpcServer,
@@ -30,7 +30,7 @@ from neuronsmae.server.rpc import (
     check_port,
     watch_parent,
 )
-from neuronsmae.server.service import DEFAULT_LEASE_S, ArenaService
+from neuronsmae.server.serving.service import DEFAULT_LEASE_S, ArenaService
 
 log = logging.getLogger("neuronsmae.server")
 

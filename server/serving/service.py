@@ -1,6 +1,6 @@
 """The arena service: request bytes in, reply bytes out, whatever the bytes are.
 
-This is the transport-free half of the server (``server/rpc.py`` is the Zenoh half), so the
+This is the transport-free half of the server (``server/serving/rpc.py`` is the Zenoh half), so the
 rules below can be tested without a network:
 
 * Every request gets a reply. Undecodable, mistyped or oversized requests get a typed error
