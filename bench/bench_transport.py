@@ -39,8 +39,8 @@ import psutil
 from bench.common import free_port, machine, table, write_json
 from bench.zenoh_floor import measure as measure_floor
 from neuronsmae.client import RM
-from neuronsmae.client.link import Link
 from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import Ping, encode_request
 from neuronsmae.server.arena import Arena
 

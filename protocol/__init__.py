@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from neuronsmae.protocol.errors import (
     BusyError,
+    ForkedZenohError,
     InvalidActionError,
     InvalidContextError,
     InvalidOptionError,
@@ -18,11 +19,12 @@ from neuronsmae.protocol.errors import (
     ServerUnavailableError,
     VersionMismatchError,
 )
-from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
 
 __all__ = [
     "ArenaAPI",
     "BusyError",
+    "ForkedZenohError",
     "InvalidActionError",
     "InvalidContextError",
     "InvalidOptionError",
@@ -32,5 +34,6 @@ __all__ = [
     "ResetNeededError",
     "ServerError",
     "ServerUnavailableError",
+    "VecArenaAPI",
     "VersionMismatchError",
 ]

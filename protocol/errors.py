@@ -23,7 +23,8 @@ class InvalidActionError(NeuronsMAEError, ValueError):
 
 
 class InvalidContextError(NeuronsMAEError, ValueError):
-    """A reset context names an unknown key or a value out of its range."""
+    """A reset context names an unknown key or a value out of its range, or the reset seed
+    is not an integer in [0, 2⁶³ − 1]."""
 
     code = "invalid_context"
 
@@ -118,6 +119,14 @@ class ReplayMismatchError(NeuronsMAEError):
     def __init__(self, message: str, decision: int = -1) -> None:
         super().__init__(message)
         self.decision = decision
+
+
+class ForkedZenohError(NeuronsMAEError, RuntimeError):
+    """A Zenoh session was asked for in a child forked from a process that had already
+    opened one; Zenoh's runtime does not survive ``fork``. The message says how to start
+    the child instead (the ``spawn`` context)."""
+
+    code = "forked_zenoh"
 
 
 class MissingDependencyError(NeuronsMAEError, ImportError):

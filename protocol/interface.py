@@ -100,11 +100,97 @@ class ArenaAPI(abc.ABC):
 
 
 def inherit_docstrings(cls: type) -> type:
-    """Class decorator: each method overriding an :class:`ArenaAPI` method without a
-    docstring of its own gets the interface's, so ``help(RM.step)``, ``help(Arena.step)``
-    and a wrapper's ``step`` all tell the same contract."""
-    for name in ArenaAPI.__abstractmethods__:
-        method = cls.__dict__.get(name)
-        if method is not None and not method.__doc__:
-            method.__doc__ = getattr(ArenaAPI, name).__doc__
+    """Class decorator: each method overriding a contract method (of :class:`ArenaAPI` or
+    :class:`VecArenaAPI`) without a docstring of its own gets the contract's, so
+    ``help(RM.step)``, ``help(Arena.step)`` and a wrapper's ``step`` all tell the same
+    contract."""
+    contracts = [c for c in cls.__mro__ if c.__name__ in ("ArenaAPI", "VecArenaAPI")]
+    for contract in contracts:
+        for name in contract.__abstractmethods__:
+            method = cls.__dict__.get(name)
+            if method is not None and not method.__doc__:
+                method.__doc__ = getattr(contract, name).__doc__
     return cls
+
+
+class VecArenaAPI(abc.ABC):
+    """K arenas stepped together: the contract of the in-process ``VecArena`` and the remote
+    ``VecRM``, so that trainers and tests can swap them.
+
+    Arena ``i`` of a vector built with seed ``s`` is seeded ``s + i`` and plays exactly like
+    ``Arena(seed=s + i)`` given the same contexts and actions. Results are stacked numpy
+    arrays with the arena index first: ``obs [K, n_agents, obs_dim]`` float32,
+    ``rewards [K, n_agents]`` float64, ``dones [K]`` bool, ``state [K, state_dim]`` float32,
+    ``avail_actions [K, n_agents, n_actions]`` int8, and ``infos``, a list of K dicts.
+
+    Autoreset: Gymnasium 1.x's *next-step* mode. An arena whose episode ends at step ``t``
+    reports ``done`` with its final observation, state and masks in that step's arrays;
+    the next :meth:`step` resets it instead of stepping it (its action row is ignored) and
+    returns its first observation, reward 0, ``done`` False and an empty info. That reset
+    uses the arena's entry of ``seeds`` and ``contexts`` given to that :meth:`step` when
+    there is one, else the arena's own RNG and the contexts of its previous reset.
+    """
+
+    num_envs: int
+    """K, the number of arenas."""
+
+    @abc.abstractmethod
+    def reset(
+        self,
+        contexts: Mapping[str, Any] | Sequence[Mapping[str, Any] | None] | None = None,
+        seed: int | Sequence[int | None] | None = None,
+    ) -> np.ndarray:
+        """Reset every arena; return ``obs [K, n_agents, obs_dim]``.
+
+        ``contexts`` is one mapping for all arenas or one (or None) per arena; ``seed`` an
+        int (arena i gets ``seed + i``, as Gymnasium's vector environments do) or one seed
+        (or None) per arena. Raises ``InvalidContextError`` naming the arena and the key;
+        a refused reset changes no arena.
+        """
+
+    @abc.abstractmethod
+    def step(
+        self,
+        actions: Any,
+        *,
+        seeds: Sequence[int | None] | None = None,
+        contexts: Sequence[Mapping[str, Any] | None] | None = None,
+        active: Sequence[bool] | np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        """One decision in every arena: ``actions`` has one row per arena (``[K, n_agents]``
+        ints, or ``[K, n_agents, 4]`` for continuous actions).
+
+        Returns ``(obs, rewards, dones, infos)``. ``seeds`` and ``contexts`` (one entry or
+        None per arena) serve the arenas that autoreset in this step (see the class
+        docstring). Arenas where ``active`` is False are left untouched: not stepped, not
+        reset, reward 0, ``done`` False, empty info. Raises ``InvalidActionError`` naming
+        the arena and agent, ``InvalidContextError``, or ``ResetNeededError`` before the
+        first :meth:`reset`; a refused request changes no arena.
+        """
+
+    @abc.abstractmethod
+    def get_obs(self) -> np.ndarray:
+        """``[K, n_agents, obs_dim]``: what the last reset or step returned."""
+
+    @abc.abstractmethod
+    def get_state(self) -> np.ndarray:
+        """``[K, state_dim]``: every arena's global state (see ``ArenaAPI.get_state``)."""
+
+    @abc.abstractmethod
+    def get_avail_actions(self) -> np.ndarray:
+        """``[K, n_agents, n_actions]`` int8 masks (see ``ArenaAPI.get_avail_actions``)."""
+
+    @abc.abstractmethod
+    def get_env_info(self) -> dict[str, Any]:
+        """One arena's ``get_env_info()`` (every arena has the same options) plus
+        ``num_envs``."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release every arena (and servers this object launched); safe to repeat."""
+
+    def __enter__(self) -> VecArenaAPI:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -27,8 +27,12 @@ from neuronsmae.protocol.errors import (
     VersionMismatchError,
 )
 
-PROTOCOL_VERSION = 1
-"""Bumped on any incompatible change to the messages or the codec."""
+PROTOCOL_VERSION = 2
+"""The version this code speaks: 2 added the vector messages (``vreset``, ``vstep``,
+``vget``) and the ``arenas`` fields. Bumped on any incompatible change."""
+SUPPORTED_VERSIONS = (1, 2)
+"""Versions a server answers. Version 1 is version 2 without the vector messages and the
+``arenas`` fields, so a version-1 client keeps working against a one-arena server."""
 MAX_REQUEST_BYTES = 1 << 20
 """Largest request a server decodes (1 MiB); requests carry actions and options, never
 images, so anything bigger is a mistake or an attack."""
@@ -50,6 +54,8 @@ class NotConfiguredError(NeuronsMAEError):
 GET_TARGETS = ("obs", "state", "avail_actions", "env_info")
 """What a ``get`` request may ask for; each maps to the ``ArenaAPI`` method ``get_<what>``."""
 MAX_SEED = 2**63 - 1
+MAX_ARENAS = 64
+"""Most arenas one server may hold (``neuronsmae-server --arenas``)."""
 
 
 def rpc_key(port: int) -> str:
@@ -92,6 +98,41 @@ def _actions(name: str, value: Any) -> list[Any] | np.ndarray:
     return value
 
 
+def _arenas(name: str, value: Any) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise _bad(name, "an integer", value)
+    if not 1 <= int(value) <= MAX_ARENAS:
+        raise _bad(name, f"in [1, {MAX_ARENAS}]", value)
+    return int(value)
+
+
+def _per_arena(check: Callable[[str, Any], Any]) -> Callable[[str, Any], Any]:
+    """A list with one entry per arena, each nil or passing ``check`` (the service checks
+    the length, which only it knows)."""
+
+    def checked(name: str, value: Any) -> list[Any]:
+        if not isinstance(value, list):
+            raise _bad(name, "an array with one entry (or nil) per arena", value)
+        return [None if v is None else check(f"{name}[{i}]", v) for i, v in enumerate(value)]
+
+    return checked
+
+
+def _contexts_for_all(name: str, value: Any) -> dict[str, Any] | list[Any]:
+    """One contexts map for every arena, or an array of one map (or nil) per arena."""
+    if isinstance(value, dict):
+        return _str_map(name, value)
+    return _per_arena(_str_map)(name, value)
+
+
+def _flags(name: str, value: Any) -> list[bool]:
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype == np.bool_:
+        return value.tolist()
+    if not isinstance(value, list) or not all(isinstance(v, bool) for v in value):
+        raise _bad(name, "an array of booleans, one per arena", value)
+    return value
+
+
 def _target(name: str, value: Any) -> str:
     if value not in GET_TARGETS:
         raise _bad(name, f"one of {list(GET_TARGETS)}", value)
@@ -114,13 +155,16 @@ class Message:
 
 @dataclass(frozen=True)
 class Configure(Message):
-    """Claim the server for this session and build its arena from ``seed`` and ``options``.
+    """Claim the server for this session and build its arenas from ``seed`` and ``options``.
 
-    ``seed`` None keeps the server's default (its ``--seed``)."""
+    ``seed`` None keeps the server's default (its ``--seed``); arena i gets ``seed + i``.
+    ``arenas`` is how many arenas the client expects the server to hold (None: 1); another
+    count than the server's ``--arenas`` is refused with ``invalid_option``."""
 
     TYPE: ClassVar[str] = "configure"
     seed: int | None = field(default=None, metadata=_check(_optional(_seed)))
     options: dict[str, Any] = field(default_factory=dict, metadata=_check(_str_map))
+    arenas: int | None = field(default=None, metadata=_check(_optional(_arenas)))
 
 
 @dataclass(frozen=True)
@@ -145,6 +189,50 @@ class Get(Message):
     """``ArenaAPI.get_<what>()`` for ``what`` in :data:`GET_TARGETS`."""
 
     TYPE: ClassVar[str] = "get"
+    what: str = field(metadata=_check(_target))
+
+
+@dataclass(frozen=True)
+class VReset(Message):
+    """Reset every arena of the server: ``VecArenaAPI.reset``.
+
+    ``contexts``: one map for all arenas, or one map (or nil) per arena; ``seeds``: one
+    seed (or nil) per arena."""
+
+    TYPE: ClassVar[str] = "vreset"
+    contexts: dict[str, Any] | list[Any] | None = field(
+        default=None, metadata=_check(_optional(_contexts_for_all))
+    )
+    seeds: list[int | None] | None = field(
+        default=None, metadata=_check(_optional(_per_arena(_seed)))
+    )
+
+
+@dataclass(frozen=True)
+class VStep(Message):
+    """One decision in every active arena: ``VecArenaAPI.step``.
+
+    ``actions`` has one row per arena. An arena whose episode ended at the previous step is
+    reset instead (its row is ignored), with its entry of ``seeds`` and ``contexts`` when
+    given. ``active`` (one bool per arena; nil: all) leaves the arenas marked false
+    untouched."""
+
+    TYPE: ClassVar[str] = "vstep"
+    actions: Any = field(metadata=_check(_actions))
+    seeds: list[int | None] | None = field(
+        default=None, metadata=_check(_optional(_per_arena(_seed)))
+    )
+    contexts: list[Any] | None = field(
+        default=None, metadata=_check(_optional(_per_arena(_str_map)))
+    )
+    active: list[bool] | None = field(default=None, metadata=_check(_optional(_flags)))
+
+
+@dataclass(frozen=True)
+class VGet(Message):
+    """``VecArenaAPI.get_<what>()``: every arena's value, stacked."""
+
+    TYPE: ClassVar[str] = "vget"
     what: str = field(metadata=_check(_target))
 
 
@@ -177,8 +265,11 @@ class Close(Message):
 
 
 MESSAGES: dict[str, type[Message]] = {
-    cls.TYPE: cls for cls in (Configure, Reset, Step, Get, Contexts, Render, Ping, Close)
+    cls.TYPE: cls
+    for cls in (Configure, Reset, Step, Get, Contexts, Render, Ping, Close, VReset, VStep, VGet)
 }
+VECTOR_MESSAGES: frozenset[type[Message]] = frozenset({VReset, VStep, VGet})
+"""Messages that address every arena of a server at once (protocol version 2)."""
 ENVELOPE = ("v", "type", "session")
 
 
@@ -209,9 +300,10 @@ def decode_request(data: bytes | bytearray | memoryview) -> Request:
     if "v" not in wire:
         raise MalformedMessageError("request lacks the protocol version field 'v'")
     version = wire["v"]
-    if type(version) is not int or version != PROTOCOL_VERSION:
+    if type(version) is not int or version not in SUPPORTED_VERSIONS:
         raise VersionMismatchError(
-            f"client speaks protocol version {version!r}, server speaks {PROTOCOL_VERSION}"
+            f"client speaks protocol version {version!r}, server speaks "
+            f"{' and '.join(map(str, SUPPORTED_VERSIONS))}"
         )
     kind = wire.get("type")
     cls = MESSAGES.get(kind) if isinstance(kind, str) else None
@@ -219,10 +311,21 @@ def decode_request(data: bytes | bytearray | memoryview) -> Request:
         raise MalformedMessageError(
             f"unknown request type {wire.get('type')!r:.40}; known: {sorted(MESSAGES)}"
         )
-    session = wire.get("session", "")
+    if "session" not in wire:
+        raise MalformedMessageError("request lacks the envelope field 'session'")
+    session = wire["session"]
     if not isinstance(session, str) or len(session) > 128:
         raise _bad("session", "a string of at most 128 characters", session)
-    return Request(body=_body(cls, wire), session=session)
+    if cls is Configure and not session:
+        raise MalformedMessageError(
+            "'configure' needs a non-empty 'session': ownership is by session id"
+        )
+    body = _body(cls, wire)
+    if version < 2 and (cls in VECTOR_MESSAGES or getattr(body, "arenas", None) is not None):
+        raise VersionMismatchError(
+            f"{cls.TYPE!r} with these fields is protocol version 2; the request says v=1"
+        )
+    return Request(body=body, session=session)
 
 
 def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:

@@ -17,7 +17,7 @@ import numpy as np
 from neuronsmae.protocol.errors import ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 from neuronsmae.server.config import ArenaConfig
-from neuronsmae.server.contexts import EpisodeContext, parse_contexts
+from neuronsmae.server.contexts import EpisodeContext, check_seed, parse_contexts
 from neuronsmae.server.render import render_scene
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.sim.chassis import Chassis, ChassisParams
@@ -118,7 +118,7 @@ class Arena(ArenaAPI):
     ) -> list[np.ndarray]:
         self.context = ctx = parse_contexts(contexts)
         if seed is not None:
-            self.rng = np.random.default_rng(int(seed))
+            self.rng = np.random.default_rng(check_seed(seed))
             self.referee.rng = self.rng
         cfg = self.config
         if cfg.spawn == "random":
@@ -158,7 +158,7 @@ class Arena(ArenaAPI):
             raise ResetNeededError(
                 "step() called before reset() or after the episode ended; call reset() first"
             )
-        checked = self.decoder.validate(actions, len(self.agents))
+        checked = self.check_actions(actions)
         intents = self._intents(checked)
         orders = Orders(intents, self._plan(intents))
         tally = StepTally.zero()
@@ -192,9 +192,11 @@ class Arena(ArenaAPI):
         return self.get_obs(), rewards, self.done, info
 
     def get_obs(self) -> list[np.ndarray]:
+        self._need_episode("get_obs()")
         return [o.copy() for o in self._obs]
 
     def get_state(self) -> np.ndarray:
+        self._need_episode("get_state()")
         ref = self.referee
         return O.global_state(
             O.norm_pose(self.poses),
@@ -204,8 +206,7 @@ class Arena(ArenaAPI):
         )
 
     def get_avail_actions(self) -> list[np.ndarray]:
-        if self._episodes == 0:  # no candidate goals yet: a typed error, not an AttributeError
-            raise ResetNeededError("get_avail_actions() needs an episode: call reset() first")
+        self._need_episode("get_avail_actions()")  # no candidate goals before a reset
         alive = self.referee.alive
         return [
             self.decoder.mask(
@@ -234,13 +235,25 @@ class Arena(ArenaAPI):
         }
 
     def render(self) -> np.ndarray:
-        if self._episodes == 0:  # not ``self._obs``: in "bots" mode there are no agents
-            raise ResetNeededError("render() needs a scene: call reset() first")
+        self._need_episode("render()")
         return render_scene(self)
 
     def close(self) -> None:
         self.world.close()
         self.done = True
+
+    # --- checks ---------------------------------------------------------------------------
+    def check_actions(self, actions: Sequence[Any]) -> list[Any]:
+        """Validate a joint action without stepping: the per-agent actions as ``step`` will
+        use them, or ``InvalidActionError`` naming the agent and the bound. ``VecArena``
+        checks every arena's row this way before it steps any arena."""
+        return self.decoder.validate(actions, len(self.agents))
+
+    def _need_episode(self, what: str) -> None:
+        """Before the first reset there is no scene (no poses, candidate points or
+        observations): a typed error, not an arbitrary value."""
+        if self._episodes == 0:
+            raise ResetNeededError(f"{what} needs an episode: call reset() first")
 
     # --- scenes ---------------------------------------------------------------------------
     def place(self, poses: np.ndarray, bullets: Sequence[float] | None = None) -> list[np.ndarray]:

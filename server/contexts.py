@@ -14,6 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from neuronsmae.protocol.errors import InvalidContextError
 
 
@@ -136,6 +138,19 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
         opponent_hp=values.get("opponent_hp", 600.0),
         level=level,
     )
+
+
+MAX_SEED = 2**63 - 1
+"""Largest reset seed (the wire's limit: a signed 64-bit integer)."""
+
+
+def check_seed(seed: Any) -> int:
+    """A reset seed as an int, or ``InvalidContextError`` saying what is valid."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise InvalidContextError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
+    if not 0 <= int(seed) <= MAX_SEED:
+        raise InvalidContextError(f"seed {int(seed)} is out of range; valid: [0, {MAX_SEED}]")
+    return int(seed)
 
 
 def _check_value(key: str, value: Any, spec: ContextKey) -> float:

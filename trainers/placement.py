@@ -28,8 +28,8 @@ import ray
 from ray.exceptions import GetTimeoutError, RayError
 
 from neuronsmae.client import ping
-from neuronsmae.client.launcher import ServerProcess
 from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.protocol.launch import ServerCommand, ServerProcess
 from neuronsmae.trainers.config import TrainConfig, parse_resources
 
 SERVER_STARTUP_S = 180.0
@@ -57,7 +57,9 @@ class ServerActor:
         """Launch (or relaunch) the server the same way ``RM`` launches a local one."""
         if self.server is not None:
             self.server.stop()
-        self.server = ServerProcess(self.port, self.seed, self.host, self.time_scale, True)
+        self.server = ServerProcess(
+            ServerCommand(self.port, self.seed, self.host, time_scale=self.time_scale)
+        )
         self.starts += 1
         self.server.wait_ready(self._answers, SERVER_STARTUP_S)
 

@@ -1,7 +1,10 @@
-"""``neuronsmae-server``: serve one arena over Zenoh on one TCP port.
+"""``neuronsmae-server``: serve arenas over Zenoh on one TCP port.
 
-    neuronsmae-server --port 10000 --seed 1234 [--time-scale 100] [--no-graphics]
-                      [--host 127.0.0.1]
+    neuronsmae-server --port 10000 --seed 1234 [--arenas 1] [--time-scale 100]
+                      [--no-graphics] [--host 127.0.0.1]
+
+One arena by default (the released build's one environment per port); ``--arenas K`` holds
+K arenas, seeded ``seed + i``, that one vector request steps together.
 
 Exit status: 0 after a SIGTERM/SIGINT shutdown, 2 when the port is taken or the arguments
 are wrong, 1 when the arena or Zenoh fails to start.
@@ -19,6 +22,7 @@ from collections.abc import Sequence
 import zenoh
 
 from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.protocol.messages import MAX_ARENAS
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
@@ -37,7 +41,7 @@ log = logging.getLogger("neuronsmae.server")
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="neuronsmae-server", description="Serve one NeuronsMAE arena over Zenoh."
+        prog="neuronsmae-server", description="Serve NeuronsMAE arenas over Zenoh on one port."
     )
     p.add_argument("--port", type=int, default=10000, help="TCP port to listen on (10000)")
     p.add_argument(
@@ -45,6 +49,13 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=1234,
         help="arena seed used until a client configures its own (1234)",
+    )
+    p.add_argument(
+        "--arenas",
+        type=int,
+        default=1,
+        help=f"arenas held, seeded seed, seed+1, ...; one vector request steps them all "
+        f"(1; at most {MAX_ARENAS})",
     )
     p.add_argument(
         "--time-scale",
@@ -124,6 +135,9 @@ def run(argv: Sequence[str] | None = None) -> int:
     if not 0 < args.port < 65536 or args.time_scale < 0:
         log.error("--port must be in 1..65535 and --time-scale >= 0")
         return 2
+    if not 1 <= args.arenas <= MAX_ARENAS:
+        log.error("--arenas must be in 1..%d", MAX_ARENAS)
+        return 2
     if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
         log.error("--busy-poll must be in 0..%g microseconds", MAX_BUSY_POLL_US)
         return 2
@@ -176,6 +190,7 @@ def _serve(args: argparse.Namespace, stop: StopSignal) -> int:
         time_scale=args.time_scale,
         lease_s=args.lease,
         context_table=context_table,
+        arenas=args.arenas,
     )
     rpc = RpcServer(service, args.host, args.port, stop, args.router, args.busy_poll * 1e-6)
     with service, rpc as server:

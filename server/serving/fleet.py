@@ -1,11 +1,12 @@
 """``neuronsmae-serve``: run N arena servers on consecutive ports and keep them up.
 
-    neuronsmae-serve --base-port 10000 --count 8 --seed 1 [--host 127.0.0.1]
+    neuronsmae-serve --base-port 10000 --count 8 --seed 1 [--arenas 1] [--host 127.0.0.1]
                      [--time-scale 100] [--router tcp/10.0.0.1:7447] [--interval 2]
     neuronsmae-serve status --base-port 10000 --count 8 [--json]
     python -m neuronsmae.server.serving.fleet ...   (the same, without the console script)
 
-Server ``i`` listens on ``base_port + i`` with seed ``seed + i``, as a subprocess of its own
+Server ``i`` listens on ``base_port + i`` and holds ``--arenas`` arenas (1 by default) seeded
+``seed + i * arenas`` onward, as a subprocess of its own
 (``python -m neuronsmae.server``), never a fork, because this process holds Zenoh sessions
 for the pings. Server 0 starts first and the rest only once it answers, so the numba
 kernels are compiled (and cached on disk) once rather than by all N at once. Every
@@ -29,6 +30,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.server.serving.probe import Probe
 from neuronsmae.server.serving.supervisor import (
     BAD_ARGUMENTS,
@@ -133,7 +135,15 @@ def _run_parser() -> argparse.ArgumentParser:
         epilog="`neuronsmae-serve status --base-port P --count N` lists their health.",
     )
     _common(p)
-    p.add_argument("--seed", type=int, default=1234, help="seed of server 0; server i: +i")
+    p.add_argument(
+        "--seed", type=int, default=1234, help="seed of server 0's first arena; +1 per arena"
+    )
+    p.add_argument(
+        "--arenas",
+        type=int,
+        default=1,
+        help="arenas per server, stepped together by one vector request (1)",
+    )
     p.add_argument(
         "--time-scale", type=float, default=100.0, help="servers' pace cap; 0 = unlimited"
     )
@@ -206,8 +216,9 @@ def _run_main(argv: list[str]) -> int:
             time_scale=args.time_scale,
             lease=args.lease,
             log_level=args.server_log_level,
+            arenas=args.arenas,
         )
-    except ValueError as exc:
+    except (ValueError, NeuronsMAEError) as exc:
         parser.error(str(exc))
     stop = StopFlag()
     stop.install()
@@ -221,8 +232,9 @@ def _run_main(argv: list[str]) -> int:
         if not stop.set:
             ports = f"{spec.base_port}..{spec.base_port + spec.count - 1}"
             log.info(
-                "serving %d arenas on %s ports %s; logs in %s; state in %s",
+                "serving %d × %d arenas on %s ports %s; logs in %s; state in %s",
                 spec.count,
+                spec.arenas,
                 spec.host,
                 ports,
                 fleet.log_dir,

@@ -5,14 +5,18 @@ rules below can be tested without a network:
 
 * Every request gets a reply. Undecodable, mistyped or oversized requests get a typed error
   reply; they never reach the arena, so the episode in progress is untouched.
-* One arena per process, owned by at most one client session at a time. ``configure`` claims
-  it; the owner keeps it until it sends ``close`` or stays silent for ``lease_s`` seconds, and
-  while it holds it every other session's ``configure`` (and arena request) gets
-  ``BusyError``. Ping and the context table are answered for anyone.
-* ``configure`` rebuilds the arena when its (seed, options) differ from the current ones, or
-  when the arena has run episodes for another session: so ``RM(seed=s)`` replays exactly what
-  ``Arena(seed=s)`` would, however the server was used before.
-* ``step`` is paced to at most ``time_scale`` times real time (0 = unlimited).
+* One server holds ``arenas`` arenas (a :class:`~neuronsmae.server.vec.VecArena`; one by
+  default), owned together by at most one client session at a time. ``configure`` claims
+  them; the owner keeps them until it sends ``close`` or stays silent for ``lease_s``
+  seconds, and while it holds them every other session's ``configure`` (and arena request)
+  gets ``BusyError``. Ping and the context table are answered for anyone.
+* ``configure`` rebuilds the arenas when their (seed, options) differ from the current ones,
+  or when they have run episodes for another session: so ``RM(seed=s)`` replays exactly
+  what ``Arena(seed=s)`` would, however the server was used before.
+* The one-arena messages (``reset``, ``step``, ``get``, ``render``) serve a one-arena
+  server; the vector messages (``vreset``, ``vstep``, ``vget``) serve any. Every change of
+  state goes through the ``VecArena``, so the two kinds may be mixed on a one-arena server.
+* ``step`` and ``vstep`` are paced to at most ``time_scale`` times real time (0 = unlimited).
 """
 
 from __future__ import annotations
@@ -24,8 +28,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from neuronsmae.protocol.codec import encode
-from neuronsmae.protocol.errors import BusyError, NeuronsMAEError, ServerError
+from neuronsmae.protocol.errors import (
+    BusyError,
+    InvalidOptionError,
+    MalformedMessageError,
+    NeuronsMAEError,
+    ServerError,
+)
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.messages import (
     PROTOCOL_VERSION,
@@ -43,9 +55,13 @@ from neuronsmae.protocol.messages import (
     Request,
     Reset,
     Step,
+    VGet,
+    VReset,
+    VStep,
     decode_request,
     encode_reply,
 )
+from neuronsmae.server.vec import VecArena
 
 log = logging.getLogger("neuronsmae.server")
 
@@ -85,9 +101,9 @@ class Pacer:
 
 @dataclass
 class _Built:
-    """The current arena and what it was built from."""
+    """The current arenas and what they were built from."""
 
-    arena: ArenaAPI
+    vec: VecArena
     seed: int
     options_key: bytes
     session: str | None = None
@@ -96,6 +112,8 @@ class _Built:
 
 SNAPSHOT_AFTER: frozenset[type[Message]] = frozenset({Reset, Step})
 """Requests whose replies carry the state and availability masks (see ``OkReply``)."""
+ONE_ARENA: frozenset[type[Message]] = frozenset({Reset, Step, Get, Render})
+"""Requests that address the one arena of a one-arena server."""
 
 
 def warm_up(factory: Callable[..., ArenaAPI], seed: int = 0) -> None:
@@ -135,9 +153,12 @@ class ArenaService:
         lease_s: float = DEFAULT_LEASE_S,
         context_table: Callable[[], Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
+        arenas: int = 1,
     ) -> None:
         self.server_id = uuid.uuid4().hex
         """Identifies this server process; a client sees it change when a server restarts."""
+        self.arenas = arenas
+        """How many arenas this server holds (``neuronsmae-server --arenas``)."""
         self._factory = factory
         self._default_seed = seed
         self._time_scale = time_scale
@@ -157,6 +178,9 @@ class ArenaService:
             Contexts: self._contexts,
             Ping: self._ping,
             Close: self._close,
+            VReset: self._vreset,
+            VStep: self._vstep,
+            VGet: self._vget,
         }
         self._open_to_all: frozenset[type[Message]] = frozenset({Configure, Contexts, Ping, Close})
 
@@ -175,7 +199,7 @@ class ArenaService:
         """Close the arena; safe to call twice."""
         built, self._built = self._built, None
         if built is not None:
-            built.arena.close()
+            built.vec.close()
 
     # ---- the one entry point -----------------------------------------------------------
 
@@ -203,6 +227,11 @@ class ArenaService:
         body = request.body
         if type(body) not in self._open_to_all:
             self._check_owner(request.session)
+        if type(body) in ONE_ARENA and self.arenas != 1:
+            raise MalformedMessageError(
+                f"{body.TYPE!r} addresses a one-arena server; this one holds {self.arenas} "
+                f"arenas: send 'v{body.TYPE}' with one entry per arena"
+            )
         return self._handlers[type(body)](body, request.session)
 
     def _check_owner(self, session: str) -> None:
@@ -222,14 +251,19 @@ class ArenaService:
         )
 
     def _snapshot(self) -> dict[str, Any]:
-        arena = self._arena
-        return {"state": arena.get_state(), "avail_actions": arena.get_avail_actions()}
+        vec = self._vec
+        return {"state": vec.get_state()[0], "avail_actions": list(vec.get_avail_actions()[0])}
+
+    @property
+    def _vec(self) -> VecArena:
+        if self._built is None:
+            raise ServerError("the server has no arena (it is shutting down)")
+        return self._built.vec
 
     @property
     def _arena(self) -> ArenaAPI:
-        if self._built is None:
-            raise ServerError("the server has no arena (it is shutting down)")
-        return self._built.arena
+        """The arena of a one-arena server, for reads (changes go through ``_vec``)."""
+        return self._vec.arenas[0]
 
     # ---- handlers ----------------------------------------------------------------------
 
@@ -237,6 +271,14 @@ class ArenaService:
         now = self._clock()
         if self._owner not in (None, session) and now - self._owner_seen < self._lease_s:
             raise self._busy()
+        wanted = 1 if body.arenas is None else body.arenas
+        if wanted != self.arenas:
+            raise InvalidOptionError(
+                f"this server holds {self.arenas} arena(s) (neuronsmae-server --arenas "
+                f"{self.arenas}); the client asked for {wanted}: use a client for "
+                f"{self.arenas} arena(s) (RM for one, VecRM(num_envs={self.arenas}) for more) "
+                "or a server started with the count it needs"
+            )
         seed = self._default_seed if body.seed is None else body.seed
         key = _options_key(body.options)
         built = self._built
@@ -250,17 +292,22 @@ class ArenaService:
         assert self._built is not None
         self._built.session = session
         self._owner, self._owner_seen = session, now
-        return {"version": PROTOCOL_VERSION, "server": self.server_id, "rebuilt": rebuilt}
+        return {
+            "version": PROTOCOL_VERSION,
+            "server": self.server_id,
+            "rebuilt": rebuilt,
+            "arenas": self.arenas,
+        }
 
     def _build(self, seed: int, options: dict[str, Any]) -> None:
-        """Build the new arena first, so a refused option leaves the old one serving."""
-        arena = self._factory(seed=seed, **options)
-        old, self._built = self._built, _Built(arena, seed, _options_key(options))
+        """Build the new arenas first, so a refused option leaves the old ones serving."""
+        vec = VecArena(seed, self.arenas, factory=self._factory, **options)
+        old, self._built = self._built, _Built(vec, seed, _options_key(options))
         if old is not None:
-            old.arena.close()
+            old.vec.close()
         period = 0.0
         if self._time_scale > 0:
-            steps = arena.get_env_info().get("decision_steps", 1)
+            steps = vec.get_env_info().get("decision_steps", 1)
             period = steps * PHYSICS_DT / self._time_scale
         self._pacer = Pacer(period, clock=self._clock)
         log.info("arena built: seed=%s options=%s", seed, options)
@@ -268,15 +315,47 @@ class ArenaService:
     def _reset(self, body: Reset, session: str) -> Any:
         assert self._built is not None
         self._built.used = True
-        return self._arena.reset(contexts=body.contexts, seed=body.seed)
+        self._vec.reset(body.contexts, None if body.seed is None else [body.seed])
+        return self._arena.get_obs()
 
     def _step(self, body: Step, session: str) -> Any:
-        arena = self._arena
+        arena, vec = self._arena, self._vec
+        if arena.done:  # one-arena semantics: no autoreset
+            arena.step(body.actions)  # raises ResetNeededError, exactly as in process
         self._pacer.wait()
-        return list(arena.step(body.actions))
+        _, rewards, dones, infos = vec.step([body.actions])
+        return [arena.get_obs(), rewards[0].tolist(), bool(dones[0]), infos[0]]
 
     def _get(self, body: Get, session: str) -> Any:
         return getattr(self._arena, f"get_{body.what}")()
+
+    def _vreset(self, body: VReset, session: str) -> Any:
+        assert self._built is not None
+        self._built.used = True
+        vec = self._vec
+        vec.reset(body.contexts, body.seeds)
+        return self._arrays(vec)
+
+    def _vstep(self, body: VStep, session: str) -> Any:
+        vec = self._vec
+        self._pacer.wait()
+        actions = body.actions
+        obs, rewards, dones, infos = vec.step(
+            actions, seeds=body.seeds, contexts=body.contexts, active=body.active
+        )
+        return {**self._arrays(vec, obs), "rewards": rewards, "dones": dones, "infos": infos}
+
+    def _vget(self, body: VGet, session: str) -> Any:
+        return getattr(self._vec, f"get_{body.what}")()
+
+    @staticmethod
+    def _arrays(vec: VecArena, obs: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """What a vector reply always carries: observations, states and masks."""
+        return {
+            "obs": vec.get_obs() if obs is None else obs,
+            "state": vec.get_state(),
+            "avail_actions": vec.get_avail_actions(),
+        }
 
     def _contexts(self, body: Contexts, session: str) -> Any:
         if self._context_table is None:
@@ -289,6 +368,7 @@ class ArenaService:
             "server": self.server_id,
             "owned": self._owner is not None,
             "time_scale": self._time_scale,
+            "arenas": self.arenas,
         }
 
     def _close(self, body: Close, session: str) -> None:

@@ -14,7 +14,6 @@ import logging
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -23,6 +22,7 @@ from types import FrameType
 from typing import IO
 
 from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.protocol.launch import ServerCommand
 from neuronsmae.server.serving.probe import Health, Probe
 from neuronsmae.server.serving.rpc import PortInUseError, check_port
 
@@ -48,6 +48,9 @@ class FleetSpec:
     lease: float = 60.0
     routers: tuple[str, ...] = ()
     log_level: str = "WARNING"
+    arenas: int = 1
+    """Arenas per server (``neuronsmae-server --arenas``); server i's arena j gets seed
+    ``seed + i * arenas + j``, so the fleet's arenas have distinct consecutive seeds."""
 
     def ports(self) -> list[int]:
         return [self.base_port + i for i in range(self.count)]
@@ -100,7 +103,9 @@ class Fleet:
         self.log_dir = log_dir or default_logs
         self.state_file = state_file or state_path(spec.base_port)
         self.max_missed = max_missed
-        self.members = [Member(i, port, spec.seed + i) for i, port in enumerate(spec.ports())]
+        self.members = [
+            Member(i, port, spec.seed + i * spec.arenas) for i, port in enumerate(spec.ports())
+        ]
         self.probes = [
             Probe(spec.host, m.port, spec.routers[0] if spec.routers else None, ping_timeout)
             for m in self.members
@@ -232,18 +237,19 @@ class Fleet:
 
     # ---- processes ---------------------------------------------------------------------
 
-    def command(self, member: Member) -> list[str]:
-        """The server's command line (``--watch-parent``: no orphans if we are killed)."""
+    def command(self, member: Member) -> ServerCommand:
+        """The server's command (``watch_parent``: no orphans if we are killed)."""
         spec = self.spec
-        cmd = [
-            sys.executable, "-m", "neuronsmae.server",
-            "--port", str(member.port), "--seed", str(member.seed), "--host", spec.host,
-            "--time-scale", str(spec.time_scale), "--lease", str(spec.lease),
-            "--log-level", spec.log_level, "--watch-parent", str(os.getpid()),
-        ]  # fmt: skip
-        for router in spec.routers:
-            cmd += ["--router", router]
-        return cmd
+        return ServerCommand(
+            port=member.port,
+            seed=member.seed,
+            host=spec.host,
+            arenas=spec.arenas,
+            time_scale=spec.time_scale,
+            lease=spec.lease,
+            routers=spec.routers,
+            log_level=spec.log_level,
+        )
 
     def log_file(self, member: Member) -> Path:
         return self.log_dir / f"server-{member.port}.log"
@@ -262,15 +268,7 @@ class Fleet:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         with self.log_file(member).open("ab") as logf:
             _stamp(logf, f"start {member.starts + 1} of the server on port {member.port}")
-            # A session of its own: a Ctrl-C meant for us reaches the servers only through
-            # our orderly stop, never half-way through our own shutdown.
-            member.proc = subprocess.Popen(
-                self.command(member),
-                stdin=subprocess.DEVNULL,
-                stdout=logf,
-                stderr=logf,
-                start_new_session=True,
-            )
+            member.proc = self.command(member).spawn(logf)
         member.starts += 1
         member.restart_at, member.missed, member.answered = None, 0, False
         self.probes[member.index].close()

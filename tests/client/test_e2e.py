@@ -225,7 +225,7 @@ MALFORMED = {
     "extra-field": (_raw(type="ping", sudo=True), "malformed_message"),
     "huge": (b"\x00" * (2 << 20), "message_too_large"),
     "huge-but-valid": (_raw(type="step", actions=[0] * 1_200_000), "message_too_large"),
-    "wrong-version": (msgpack.packb({"v": 2, "type": "ping", "session": "s"}), "version_mismatch"),
+    "wrong-version": (msgpack.packb({"v": 3, "type": "ping", "session": "s"}), "version_mismatch"),
     "no-version": (msgpack.packb({"type": "ping", "session": "s"}), "malformed_message"),
     "not-configured": (encode_request(Step(actions=[0, 0]), "stranger"), NOT_CONFIGURED),
     "bad-option": (encode_request(Configure(options={"warp": 9}), "x"), "invalid_option"),
@@ -355,8 +355,8 @@ def test_launch_paces_then_stops_its_server() -> None:
         RM(port=port, launch=False)
     env = RM(seed=4, port=port, time_scale=4)  # 0.4 s decisions at 4x: 0.1 s each
     try:
-        assert env._server is not None
-        proc = env._server.proc
+        assert env._conn.server is not None
+        proc = env._conn.server.proc
         assert ping(port)["owned"] is True
         assert same(env.reset(), Arena(seed=4).reset())
         t0 = time.monotonic()
@@ -375,7 +375,7 @@ ORPHAN = """
 import sys
 from neuronsmae.client import RM
 env = RM(port=int(sys.argv[1]), time_scale=0)
-print(env._server.proc.pid, flush=True)
+print(env._conn.server.proc.pid, flush=True)
 sys.stdin.read()  # wait to be killed
 """
 

@@ -34,6 +34,9 @@ from neuronsmae.protocol.messages import (
     Render,
     Reset,
     Step,
+    VGet,
+    VReset,
+    VStep,
     decode_reply,
     decode_request,
     encode_reply,
@@ -210,6 +213,14 @@ REQUESTS = [
     Render(),
     Ping(),
     Close(),
+    Configure(seed=3, options={}, arenas=8),
+    VReset(),
+    VReset(contexts={"level": "hard"}, seeds=[1, None, 3]),
+    VReset(contexts=[{"coef": 0.5}, None], seeds=None),
+    VStep(actions=np.zeros((4, 2), np.int64)),
+    VStep(actions=[[1, 2], [3, 4]], seeds=[None, 9], contexts=[None, {"VK1": 0.1}]),
+    VStep(actions=[[1, 2], [3, 4]], active=[True, False]),
+    *(VGet(what=w) for w in ("obs", "state", "avail_actions", "env_info")),
 ]
 
 
@@ -265,6 +276,21 @@ def _raw(**fields: object) -> bytes:
         _raw(type="configure", options={1: 2}),
         _raw(type="ping", session=5),
         msgpack.packb({"v": 1, "type": "ping", "session": "x" * 200}),
+        msgpack.packb({"v": 2, "type": "ping"}),  # the envelope's session is required
+        msgpack.packb({"v": 2, "type": "configure"}),
+        _raw(type="configure", session=""),  # ownership is by session id: not anonymous
+        _raw(type="configure", arenas=0),
+        _raw(type="configure", arenas=65),
+        _raw(type="configure", arenas=2.0),
+        _raw(type="vreset", seeds=5),
+        _raw(type="vreset", seeds=[1, -1]),
+        _raw(type="vreset", contexts=[{"coef": 1}, 3]),
+        _raw(type="vreset", contexts="hard"),
+        _raw(type="vstep"),
+        _raw(type="vstep", actions=[[0, 0]], active=[1]),
+        _raw(type="vstep", actions=[[0, 0]], contexts={"level": 1}),
+        _raw(type="vstep", actions=[[0, 0]], seeds=[True]),
+        _raw(type="vget", what="render"),
     ],
 )
 def test_malformed_requests(payload: bytes) -> None:
@@ -272,10 +298,25 @@ def test_malformed_requests(payload: bytes) -> None:
         decode_request(payload)
 
 
-@pytest.mark.parametrize("version", [0, 2, 99, "1", 1.0, True, None])
+@pytest.mark.parametrize("version", [0, 3, 99, "1", 1.0, True, None])
 def test_version_mismatch_names_both_versions(version: object) -> None:
     with pytest.raises(VersionMismatchError, match=rf"{version!r}.*{PROTOCOL_VERSION}"):
         decode_request(msgpack.packb({"v": version, "type": "ping", "session": "s"}))
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [{"type": "vstep", "actions": [[0, 0]]}, {"type": "vget", "what": "obs"}, {"type": "vreset"}],
+)
+def test_vector_messages_need_version_2(fields: dict[str, object]) -> None:
+    with pytest.raises(VersionMismatchError, match="version 2"):
+        decode_request(msgpack.packb({"v": 1, "session": "s", **fields}))
+
+
+def test_version_1_requests_are_still_answered() -> None:
+    wire = {"v": 1, "type": "step", "session": "s", "actions": [1]}
+    request = decode_request(msgpack.packb(wire))
+    assert isinstance(request.body, Step) and request.body.actions == [1]
 
 
 def test_oversized_request() -> None:

@@ -1,0 +1,214 @@
+"""Starting a ``neuronsmae-server`` process: its command line, built in one place.
+
+Clients (``RM`` and ``VecRM`` launching a server they found missing, the trainers' Ray
+actors) and the server side's fleet supervisor all start servers through
+:class:`ServerCommand`. A server is always a fresh interpreter
+(``sys.executable -m neuronsmae.server``), never a fork, because a process that holds a
+Zenoh session must not fork; it runs in a session of its own (a Ctrl-C meant for its parent
+reaches it only through the parent's orderly stop) and, with ``watch_parent``, exits when
+its parent dies.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import ipaddress
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import IO, Any
+
+from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
+from neuronsmae.protocol.messages import MAX_ARENAS
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
+
+STARTUP_TIMEOUT = 120.0
+"""Seconds a launched server may take to answer (imports, JIT compiles, arena builds)."""
+STOP_TIMEOUT = 5.0
+"""Seconds a server gets to leave after SIGTERM before it is killed."""
+PORT_IN_USE_STATUS = 2
+"""A server's exit status when its port is taken (or its arguments are wrong)."""
+
+
+def is_local(host: str) -> bool:
+    """Whether ``host`` names this machine (only then can a client launch a server for it)."""
+    if host in ("localhost", "0.0.0.0", "::"):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nothing listens on right now (the kernel's pick; it may be taken again
+    before a server binds it, which the server reports by exiting with status 2)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.bind((host.strip("[]"), 0))
+        return int(s.getsockname()[1])
+
+
+def check_launch(time_scale: float, busy_poll_us: float, arenas: int = 1) -> None:
+    """Refuse settings the server would exit on, before starting it, naming what is valid."""
+    if not time_scale >= 0:  # also refuses NaN
+        raise InvalidOptionError(f"time_scale must be >= 0 (0 = unlimited), got {time_scale!r}")
+    if not 0 <= busy_poll_us <= MAX_BUSY_POLL_US:
+        raise InvalidOptionError(
+            f"busy_poll_us must be in [0, {MAX_BUSY_POLL_US:g}] microseconds, got {busy_poll_us!r}"
+        )
+    if isinstance(arenas, bool) or not isinstance(arenas, int) or not 1 <= arenas <= MAX_ARENAS:
+        raise InvalidOptionError(f"arenas must be an integer in [1, {MAX_ARENAS}], got {arenas!r}")
+
+
+@dataclass(frozen=True)
+class ServerCommand:
+    """What a server is started with: each field is one ``neuronsmae-server`` flag."""
+
+    port: int
+    """TCP port to listen on (``--port``); its key is ``neuronsmae/<port>/rpc``."""
+    seed: int = 1234
+    """Seed of arena 0 until a client configures its own; arena i gets ``seed + i``."""
+    host: str = "127.0.0.1"
+    """Address to listen on (``--host``)."""
+    arenas: int = 1
+    """Arenas this server holds, stepped together by one vector request (``--arenas``)."""
+    time_scale: float = 0.0
+    """Cap on simulated/real time per request (``--time-scale``; 0 = unlimited)."""
+    busy_poll_us: float = 0.0
+    """Microseconds to poll for the next request before sleeping (``--busy-poll``)."""
+    lease: float | None = None
+    """Seconds of owner silence before another client may take over (None: the default)."""
+    routers: tuple[str, ...] = ()
+    """Zenoh routers the server also connects to (``--router``, repeated)."""
+    log_level: str | None = None
+    """``--log-level`` (None: the server's default, WARNING)."""
+    watch_parent: bool = True
+    """Pass this process's pid (``--watch-parent``): the server exits when it dies."""
+
+    def __post_init__(self) -> None:
+        check_launch(self.time_scale, self.busy_poll_us, self.arenas)
+
+    def argv(self) -> list[str]:
+        """The full command line, ``sys.executable -m neuronsmae.server ...``."""
+        cmd = [
+            sys.executable, "-m", "neuronsmae.server",
+            "--port", str(self.port), "--seed", str(self.seed), "--host", self.host,
+            "--arenas", str(self.arenas), "--time-scale", str(self.time_scale),
+            "--busy-poll", str(self.busy_poll_us), "--no-graphics",
+        ]  # fmt: skip
+        if self.lease is not None:
+            cmd += ["--lease", str(self.lease)]
+        for router in self.routers:
+            cmd += ["--router", router]
+        if self.log_level is not None:
+            cmd += ["--log-level", self.log_level]
+        if self.watch_parent:
+            cmd += ["--watch-parent", str(os.getpid())]
+        return cmd
+
+    def spawn(self, log: IO[Any] | int) -> subprocess.Popen[bytes]:
+        """Start the server with stdout and stderr going to ``log``."""
+        return subprocess.Popen(
+            self.argv(),
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+            start_new_session=True,
+        )
+
+
+class ServerProcess:
+    """A server launched for one client, with its output kept in a temporary log file."""
+
+    def __init__(self, command: ServerCommand) -> None:
+        self.command = command
+        self.port = command.port
+        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in stop)
+            prefix=f"neuronsmae-server-{command.port}-", suffix=".log", delete=False
+        )
+        self.proc = command.spawn(self._log)
+
+    def log_tail(self, limit: int = 2000) -> str:
+        """The end of the server's output, for error messages."""
+        with open(self._log.name, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - limit))
+            return f.read().decode(errors="replace").strip()
+
+    def exited(self) -> int | None:
+        """The exit status if the server has exited, else None."""
+        return self.proc.poll()
+
+    def wait_ready(self, probe: Callable[[], bool], timeout: float = STARTUP_TIMEOUT) -> None:
+        """Poll ``probe`` until it answers True; fail early if the server exits."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise ServerUnavailableError(
+                    f"the server launched on port {self.port} exited with status "
+                    f"{self.proc.returncode}:\n{self.log_tail()}"
+                )
+            if probe():
+                return
+            time.sleep(0.05)
+        self.stop()
+        raise ServerUnavailableError(
+            f"the server launched on port {self.port} did not answer within {timeout:g} s"
+        )
+
+    def stop(self) -> None:
+        """SIGTERM the server, SIGKILL it if it lingers, and delete its log; idempotent."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(STOP_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if not self._log.closed:
+            self._log.close()
+            with contextlib.suppress(OSError):
+                os.unlink(self._log.name)
+
+
+def launch_private(
+    make: Callable[[int], ServerCommand],
+    ready: Callable[[int], bool],
+    host: str = "127.0.0.1",
+    attempts: int = 5,
+) -> ServerProcess:
+    """Launch a server on a free port of ``host`` (``make(port)`` builds its command) and
+    wait until ``ready(port)``; a port taken between the pick and the bind is retried."""
+    for _ in range(attempts):
+        port = free_port(host)
+        server = ServerProcess(make(port))
+        try:
+            server.wait_ready(functools.partial(ready, port))
+            return server
+        except ServerUnavailableError:
+            if server.exited() != PORT_IN_USE_STATUS:
+                server.stop()
+                raise
+            server.stop()
+    raise ServerUnavailableError(f"no free port on {host} after {attempts} attempts")
+
+
+def ports_of(port: int | Sequence[int] | None) -> list[int] | None:
+    """``None`` (private servers), one port, or several, as a list (None stays None)."""
+    if port is None:
+        return None
+    ports = [port] if isinstance(port, int) else list(port)
+    bad = [p for p in ports if isinstance(p, bool) or not isinstance(p, int) or not 0 < p < 65536]
+    if not ports or bad:
+        raise InvalidOptionError(
+            f"port must be an integer in 1..65535 or a list of them, got {port!r}"
+        )
+    return ports
