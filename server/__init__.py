@@ -14,6 +14,7 @@ if TYPE_CHECKING:
     from neuronsmae.server.arena import Arena
     from neuronsmae.server.config import ArenaConfig
     from neuronsmae.server.contexts import CONTEXT_TABLE, context_table, parse_contexts
+    from neuronsmae.server.vec import VecArena
 
 _LAZY = {
     "Arena": "neuronsmae.server.arena",
@@ -21,9 +22,17 @@ _LAZY = {
     "CONTEXT_TABLE": "neuronsmae.server.contexts",
     "context_table": "neuronsmae.server.contexts",
     "parse_contexts": "neuronsmae.server.contexts",
+    "VecArena": "neuronsmae.server.vec",
 }
 
-__all__ = ["CONTEXT_TABLE", "Arena", "ArenaConfig", "context_table", "parse_contexts"]
+__all__ = [
+    "CONTEXT_TABLE",
+    "Arena",
+    "ArenaConfig",
+    "VecArena",
+    "context_table",
+    "parse_contexts",
+]
 
 
 def __getattr__(name: str) -> Any:

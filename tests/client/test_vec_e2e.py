@@ -1,0 +1,178 @@
+"""VecRM against real vector servers on loopback ports: parity, isolation, failures, refusals."""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Callable
+
+import msgpack
+import numpy as np
+import pytest
+
+from neuronsmae.client import RM, VecRM, ping
+from neuronsmae.protocol.errors import (
+    InvalidActionError,
+    InvalidContextError,
+    InvalidOptionError,
+    ResetNeededError,
+    ServerUnavailableError,
+)
+from neuronsmae.protocol.interface import VecArenaAPI
+from neuronsmae.protocol.messages import PROTOCOL_VERSION, ErrorReply, OkReply
+from neuronsmae.server import VecArena
+
+from .conftest import RawClient, Server
+
+CONTEXTS = [{"level": "easy"}, {"level": 1, "VK1": 0.2}, None, {"coef": 1.5}]
+
+
+def lockstep(remote: VecArenaAPI, local: VecArenaAPI, steps: int, seed: int = 0) -> int:
+    """Drive both with the same requests; every result must match bit for bit. Returns how
+    many autoresets happened."""
+    rng = np.random.default_rng(seed)
+    k = local.num_envs
+    contexts = (CONTEXTS * k)[:k]
+    assert remote.reset(contexts, seed=[None] * k).tobytes() == local.reset(contexts).tobytes()
+    resets, done = 0, np.zeros(k, bool)
+    for t in range(steps):
+        avail = local.get_avail_actions()
+        assert remote.get_avail_actions().tobytes() == avail.tobytes()
+        actions = (avail * rng.random(avail.shape)).argmax(-1)
+        seeds = [t + 10 * i if i % 2 else None for i in range(k)]
+        resets += int(done.sum())
+        got, want = remote.step(actions, seeds=seeds), local.step(actions, seeds=seeds)
+        assert got[0].tobytes() == want[0].tobytes()
+        assert got[1].tobytes() == want[1].tobytes() and got[2].tolist() == want[2].tolist()
+        assert got[3] == want[3]
+        assert remote.get_state().tobytes() == local.get_state().tobytes()
+        done = want[2]
+    return resets
+
+
+@pytest.mark.parametrize("k", [1, 4])
+def test_served_arenas_equal_plain_arenas_through_autoresets(
+    start_server: Callable[..., Server], k: int
+) -> None:
+    server = start_server("--arenas", str(k), "--seed", "500")
+    with VecRM(seed=31, port=server.port, num_envs=k, launch=False) as remote:
+        local = VecArena(seed=31, num_envs=k)
+        try:
+            assert lockstep(remote, local, steps=120) >= k
+        finally:
+            local.close()
+    assert ping(server.port)["arenas"] == k
+
+
+def test_two_vector_servers_never_cross_talk(start_server: Callable[..., Server]) -> None:
+    a, b = start_server("--arenas", "2"), start_server("--arenas", "3")
+    with (
+        VecRM(seed=1, port=a.port, num_envs=2, launch=False) as ra,
+        VecRM(seed=90, port=b.port, num_envs=3, launch=False) as rb,
+    ):
+        la, lb = VecArena(seed=1, num_envs=2), VecArena(seed=90, num_envs=3)
+        try:
+            rng = np.random.default_rng(1)
+            for remote, local in ((ra, la), (rb, lb)):
+                assert remote.reset().tobytes() == local.reset().tobytes()
+            for _ in range(30):  # interleaved: each request must only ever reach its server
+                for remote, local in ((ra, la), (rb, lb)):
+                    avail = local.get_avail_actions()
+                    actions = (avail * rng.random(avail.shape)).argmax(-1)
+                    assert remote.step(actions)[0].tobytes() == local.step(actions)[0].tobytes()
+        finally:
+            la.close()
+            lb.close()
+
+
+def test_several_servers_play_as_one_vector_and_refuse_atomically(
+    start_server: Callable[..., Server],
+) -> None:
+    a, b = start_server("--arenas", "2"), start_server("--arenas", "1")
+    with VecRM(seed=7, port=[a.port, b.port], num_envs=3, launch=False) as remote:
+        assert remote.shares == [2, 1]
+        local = VecArena(seed=7, num_envs=3)
+        try:
+            lockstep(remote, local, steps=60, seed=3)
+            t_before = remote.get_state()[:, -1].copy()
+            bad = np.zeros((3, 2), np.int64)
+            bad[2, 0] = 9  # only the second server's arena is wrong: nothing may move
+            with pytest.raises(InvalidActionError, match="arena 2: agent 0"):
+                remote.step(bad)
+            with pytest.raises(InvalidContextError, match="arena 1: unknown context key"):
+                remote.reset([None, {"speed": 1.0}, None])
+            assert remote.get_state()[:, -1].tobytes() == t_before.tobytes()
+        finally:
+            local.close()
+
+
+def test_counts_must_match_the_server(start_server: Callable[..., Server]) -> None:
+    server = start_server("--arenas", "4")
+    with pytest.raises(InvalidOptionError, match=r"holds 4 arena\(s\).*asked for 2"):
+        VecRM(port=server.port, num_envs=2, launch=False)
+    with pytest.raises(InvalidOptionError, match="VecRM"):
+        RM(port=server.port, launch=False)
+    raw = RawClient(server.port)
+    try:
+        wire = {"v": PROTOCOL_VERSION, "session": "raw"}
+        reply = raw.send(msgpack.packb({**wire, "type": "configure", "arenas": 4}))
+        assert isinstance(reply, OkReply) and reply.value["arenas"] == 4
+        reply = raw.send(msgpack.packb({**wire, "type": "step", "actions": [0, 0]}))
+        assert isinstance(reply, ErrorReply) and reply.code == "malformed_message"
+        assert "vstep" in reply.message
+        reply = raw.send(msgpack.packb({**wire, "type": "vstep", "actions": [[0, 0]] * 4}))
+        assert isinstance(reply, ErrorReply) and reply.code == "reset_needed"
+        reply = raw.send(msgpack.packb({**wire, "type": "vreset", "seeds": [1, 2]}))
+        assert isinstance(reply, ErrorReply) and reply.code == "invalid_context"
+        assert "4 entries" in reply.message
+        raw.send(msgpack.packb({**wire, "type": "close"}))
+    finally:
+        raw.close()
+
+
+def test_private_servers_run_side_by_side_and_stop_on_close() -> None:
+    first, second = VecRM(seed=1, num_envs=2), VecRM(seed=1, num_envs=2, servers=2)
+    procs = [c.server.proc for v in (first, second) for c in v._conns if c.server is not None]
+    try:
+        assert len(set(first.ports + second.ports)) == 3 and len(procs) == 3
+        assert first.reset().tobytes() == second.reset().tobytes()
+        with pytest.raises(ResetNeededError):
+            VecRM(num_envs=1).step(np.zeros((1, 2), np.int64))
+    finally:
+        first.close()
+        second.close()
+    assert all(p.wait(5) is not None for p in procs)
+
+
+def test_a_killed_vector_server_gives_a_typed_error_within_the_timeout(
+    start_server: Callable[..., Server],
+) -> None:
+    server = start_server("--arenas", "2")
+    remote = VecRM(port=server.port, num_envs=2, launch=False, timeout=2.0)
+    try:
+        remote.reset()
+        server.proc.send_signal(signal.SIGKILL)
+        server.proc.wait()
+        start = time.monotonic()
+        with pytest.raises(ServerUnavailableError):
+            remote.step(np.zeros((2, 2), np.int64))
+        assert time.monotonic() - start < 2.5
+    finally:
+        remote.close()
+
+
+def test_a_stopped_vector_server_times_out_as_a_typed_error(
+    start_server: Callable[..., Server],
+) -> None:
+    server = start_server("--arenas", "2")
+    remote = VecRM(port=server.port, num_envs=2, launch=False, timeout=1.0)
+    try:
+        remote.reset()
+        server.proc.send_signal(signal.SIGSTOP)  # alive but silent: only the timeout tells
+        start = time.monotonic()
+        with pytest.raises(ServerUnavailableError, match="within 1 s"):
+            remote.step(np.zeros((2, 2), np.int64))
+        assert time.monotonic() - start < 1.5
+    finally:
+        server.proc.send_signal(signal.SIGCONT)
+        remote.close()
