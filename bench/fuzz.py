@@ -1,21 +1,24 @@
 """Hostile input against a live server: every payload answered, with a typed error.
 
-    python -m bench.fuzz [--payloads 20000] [--seed 0] [--timeout 5]
+    python -m bench.fuzz [--payloads 20000] [--seed 0] [--timeout 5] [--arenas 1 3]
 
-Sends ``--payloads`` generated requests (a seeded mix, see :func:`payloads`: random bytes,
-random msgpack structures, byte-level mutations of valid requests, field-level mutations of
-valid requests, and hand-made edge cases: lying length prefixes, deep nesting, pickles,
-oversized and ext-typed payloads) to one ``neuronsmae-server`` on loopback, each as one
-Zenoh query with a timeout, in two phases:
+Runs one campaign per server size in ``--arenas`` (a one-arena server and a vector server
+by default). Each sends ``--payloads`` generated requests (a seeded mix, see
+:func:`payloads`: random bytes, random msgpack structures, byte-level mutations of valid
+requests (one-arena and vector ones), field-level mutations of valid requests, and
+hand-made edge cases: lying length prefixes, deep nesting, pickles, oversized and ext-typed
+payloads) to one ``neuronsmae-server`` on loopback, each as one Zenoh query with a
+timeout, in two phases:
 
 1. nobody owns the server (so a generated ``configure`` may claim it and its ``step`` may
    run): every payload must get a reply that decodes, and that is an ``ok`` or an error
    whose code is a known typed error;
-2. a client owns it and holds an episode: the payloads come from other sessions, plus those
-   with the owner's session id that the protocol itself refuses; the owner's episode must
-   go on exactly as an undisturbed in-process ``Arena`` with the same actions.
+2. a client owns it and holds episodes: the payloads come from other sessions, plus those
+   with the owner's session id that the protocol itself refuses; the owner's episodes must
+   go on exactly as undisturbed in-process arenas (``Arena`` or ``VecArena``) with the same
+   actions.
 
-Then a fresh client's episode must equal a fresh in-process ``Arena`` bit for bit. Exits 1
+Then a fresh client's episodes must equal fresh in-process arenas bit for bit. Exits 1
 when a promise breaks (no reply, an unknown code, a ``server_error``, a dead server, a
 diverging episode). Writes bench/out/fuzz.json.
 """
@@ -35,7 +38,7 @@ import numpy as np
 import zenoh
 
 from bench.common import machine, table, write_json
-from neuronsmae.client import RM
+from neuronsmae.client import RM, VecRM
 from neuronsmae.protocol.errors import ERRORS, NeuronsMAEError, ServerError
 from neuronsmae.protocol.messages import (
     MAX_REQUEST_BYTES,
@@ -50,7 +53,7 @@ from neuronsmae.protocol.messages import (
     rpc_key,
 )
 from neuronsmae.protocol.transport import client_config
-from neuronsmae.server.arena import Arena
+from neuronsmae.server import Arena, VecArena
 from tests.client.conftest import Server, free_port, same
 
 KNOWN_CODES = frozenset({*ERRORS, NOT_CONFIGURED})
@@ -96,11 +99,22 @@ def _ext_data(rng: random.Random) -> bytes:
     return msgpack.packb([dtype, shape, bytes(n)], use_bin_type=True)
 
 
-def valid_requests(session: str) -> list[dict[str, Any]]:
-    """One well-formed request of each type (as wire maps) from ``session``."""
+def valid_requests(session: str, arenas: int = 1) -> list[dict[str, Any]]:
+    """One well-formed request of each type (as wire maps) from ``session``, for a server
+    holding ``arenas`` arenas (one-arena requests are then refused, which is tested too)."""
     env = {"v": PROTOCOL_VERSION, "session": session}
+    rows = [[0, 0]] * arenas
     return [
-        {**env, "type": "configure", "seed": 7, "options": dict(OPTIONS)},
+        {**env, "type": "configure", "seed": 7, "options": dict(OPTIONS), "arenas": arenas},
+        {**env, "type": "vreset", "contexts": {"level": 1}, "seeds": [3] * arenas},
+        {**env, "type": "vreset", "contexts": [{"coef": 0.5}] * arenas, "seeds": None},
+        {**env, "type": "vstep", "actions": rows},
+        {**env, "type": "vstep", "actions": rows, "seeds": [9] * arenas, "active": [True] * arenas},
+        {**env, "type": "vstep", "actions": rows, "contexts": [{"level": "hard"}] * arenas},
+        *(
+            {**env, "type": "vget", "what": w}
+            for w in ("obs", "state", "avail_actions", "env_info")
+        ),
         {**env, "type": "reset", "contexts": {"level": 1}, "seed": None},
         {**env, "type": "step", "actions": [0, 0]},
         {**env, "type": "get", "what": "obs"},
@@ -148,7 +162,19 @@ def _mutate_fields(rng: random.Random, wire: dict[str, Any]) -> dict[Any, Any]:
         if op == 0:
             out[key] = _value(rng)
         elif op == 1:
-            out[rng.choice(["junk", "sudo", "actions", "seed", "what", 1, None])] = _value(rng)
+            names = [
+                "junk",
+                "sudo",
+                "actions",
+                "seed",
+                "seeds",
+                "what",
+                "active",
+                "arenas",
+                1,
+                None,
+            ]
+            out[rng.choice(names)] = _value(rng)
         elif op == 2:
             out.pop(key, None)
         elif op == 3:
@@ -167,6 +193,7 @@ def _edge_cases() -> list[bytes]:
             return (print, ("unpickled!",))
 
     step = {"v": PROTOCOL_VERSION, "type": "step", "session": "fuzz"}
+    vstep = {"v": PROTOCOL_VERSION, "type": "vstep", "session": "fuzz"}
     return [
         b"",
         b"\xc1",
@@ -197,13 +224,20 @@ def _edge_cases() -> list[bytes]:
         _pack({"v": PROTOCOL_VERSION, "type": "reset", "session": "fuzz",
                "contexts": {"level": float("nan"), "coef": float("inf")}}),
         _pack({**step, "actions": [[float("nan")] * 4, [1e308, -1e308, 0, 2**63]]}),
+        _pack({**vstep, "actions": [[0, 0]] * 100_000}),
+        _pack({**vstep, "actions": [[0, 0], [0, 99]], "active": [True, "yes"]}),
+        _pack({**vstep, "actions": [[0, 0]], "seeds": [2**64 - 1, -1], "contexts": [{"VK1": -5}]}),
+        _pack({**vstep, "actions": msgpack.ExtType(1, _pack(["<i8", [2**31, 2**31], b""]))}),
+        _pack({"v": PROTOCOL_VERSION, "type": "vreset", "session": "fuzz",
+               "contexts": [{"level": float("nan")}] * 70, "seeds": [None] * 70}),
+        _pack({"v": PROTOCOL_VERSION, "type": "configure", "session": "fuzz", "arenas": 10**9}),
     ]  # fmt: skip
 
 
-def payloads(seed: int, count: int, session: str = "fuzz") -> Iterator[bytes]:
+def payloads(seed: int, count: int, session: str = "fuzz", arenas: int = 1) -> Iterator[bytes]:
     """``count`` hostile payloads, the same ones for the same seed; the edge cases first."""
     rng = random.Random(seed)
-    templates = valid_requests(session)
+    templates = valid_requests(session, arenas)
     edge = _edge_cases()
     for n in range(count):
         if n < len(edge):
@@ -294,45 +328,94 @@ def broken(tally: dict[str, int]) -> int:
     return sum(n for code, n in tally.items() if code.isupper() or code == ServerError.code)
 
 
-def owner_phase(port: int, raw: Raw, seed: int, count: int, timeout: float) -> dict[str, Any]:
+def clients(port: int, arenas: int, seed: int, timeout: float) -> tuple[Any, Any]:
+    """A client of the server on ``port`` and its in-process twin (``RM`` and ``Arena`` for
+    one arena, ``VecRM`` and ``VecArena`` for several)."""
+    if arenas == 1:
+        return RM(seed, port=port, launch=False, timeout=timeout, **OPTIONS), Arena(seed, **OPTIONS)
+    remote = VecRM(seed, port=port, num_envs=arenas, launch=False, timeout=timeout, **OPTIONS)
+    return remote, VecArena(seed, arenas, **OPTIONS)
+
+
+def advance(remote: Any, local: Any, rng: np.random.Generator) -> bool:
+    """One decision (in every arena) on both with the same random available actions; True
+    when the results agree bit for bit (a finished one-arena episode is reset on both)."""
+    if isinstance(local, Arena):
+        actions = [int(rng.choice(np.flatnonzero(m))) for m in local.get_avail_actions()]
+        ok = same(remote.step(actions), local.step(actions))
+        ok &= same(remote.get_state(), local.get_state())
+        if local.done:
+            ok &= same(remote.reset(), local.reset())
+        return ok
+    avail = local.get_avail_actions()
+    actions = (avail * rng.random(avail.shape)).argmax(-1)
+    got, want = remote.step(actions), local.step(actions)
+    return same(list(got), list(want)) and same(remote.get_state(), local.get_state())
+
+
+def owner_phase(
+    port: int, raw: Raw, seed: int, count: int, timeout: float, arenas: int = 1
+) -> dict[str, Any]:
     """Fire hostile payloads between the owner's decisions (half claiming to come from the
-    owner, sent only when the protocol refuses them); its episode must not notice."""
-    with RM(seed=11, port=port, launch=False, timeout=timeout, **OPTIONS) as owner:
-        local = Arena(seed=11, **OPTIONS)
+    owner, sent only when the protocol refuses them); its episodes must not notice."""
+    remote, local = clients(port, arenas, 11, timeout)
+    try:
         rng = np.random.default_rng(11)
-        agree = same(owner.reset(), local.reset())
-        mine = payloads(seed, count // 2, session=owner.session_id)
-        theirs = payloads(seed + 1, count // 2, session="intruder")
+        agree = same(remote.reset(), local.reset())
+        owner = remote.session_id if arenas == 1 else remote._conns[0].session_id
+        mine = payloads(seed, count // 2, session=owner, arenas=arenas)
+        theirs = payloads(seed + 1, count // 2, session="intruder", arenas=arenas)
         stream = [p for pair in zip(mine, theirs, strict=True) for p in pair]
-        keep = not_from(owner.session_id)
+        keep = not_from(owner)
         tally: collections.Counter[str] = collections.Counter()
         worst, sent = 0.0, 0
         for start in range(0, len(stream), 50):
             result = fire(raw, iter(stream[start : start + 50]), timeout, keep)
             tally.update(result["codes"])
             worst, sent = max(worst, result["max_latency_s"]), sent + result["sent"]
-            actions = [int(rng.choice(np.flatnonzero(m))) for m in local.get_avail_actions()]
-            agree &= same(owner.step(actions), local.step(actions))
-            if local.done:
-                agree &= same(owner.reset(), local.reset())
+            agree &= advance(remote, local, rng)
+    finally:
+        remote.close()
         local.close()
     return {"sent": sent, "codes": dict(tally), "max_latency_s": worst, "owner_intact": agree}
 
 
-def fresh_episode_matches(port: int, seed: int = 12, decisions: int = 40) -> bool:
-    """A new client's episode equals a fresh in-process arena's, bit for bit."""
-    with RM(seed=seed, port=port, launch=False, timeout=10, **OPTIONS) as remote:
-        local = Arena(seed=seed, **OPTIONS)
+def fresh_episode_matches(port: int, seed: int = 12, decisions: int = 40, arenas: int = 1) -> bool:
+    """A new client's episodes equal fresh in-process arenas', bit for bit."""
+    remote, local = clients(port, arenas, seed, 10.0)
+    try:
         rng = np.random.default_rng(seed)
         ok = same(remote.reset(), local.reset())
         for _ in range(decisions):
-            actions = [int(rng.choice(np.flatnonzero(m))) for m in local.get_avail_actions()]
-            ok &= same(remote.step(actions), local.step(actions))
-            ok &= same(remote.get_state(), local.get_state())
-            if local.done:
-                ok &= same(remote.reset(), local.reset())
+            ok &= advance(remote, local, rng)
+    finally:
+        remote.close()
         local.close()
     return ok
+
+
+def campaign(arenas: int, count: int, seed: int, timeout: float) -> dict[str, Any]:
+    """Both phases and the fresh-episode check against one server holding ``arenas``."""
+    port = free_port()
+    server = Server(port, "--time-scale", "0", "--arenas", str(arenas)).wait_ready()
+    raw = Raw(port)
+    try:
+        open_phase = fire(raw, payloads(seed, count, arenas=arenas), timeout)
+        owned = owner_phase(port, raw, seed + 1, count // 4, timeout, arenas)
+        raw.send(msgpack.packb({"v": 1, "type": "close", "session": "fuzz"}), 1.0)
+        fresh = fresh_episode_matches(port, arenas=arenas)
+        alive = server.proc.poll() is None
+    finally:
+        raw.close()
+        server.stop()
+    rows = [
+        {"arenas": arenas, "phase": "no owner", **open_phase,
+         "broken": broken(open_phase["codes"])},
+        {"arenas": arenas, "phase": "owner holds episodes", **owned,
+         "broken": broken(owned["codes"])},
+    ]  # fmt: skip
+    ok = alive and fresh and owned["owner_intact"] and not any(r["broken"] for r in rows)
+    return {"rows": rows, "fresh_identical": fresh, "server_alive": alive, "ok": ok}
 
 
 def main() -> int:
@@ -340,33 +423,24 @@ def main() -> int:
     parser.add_argument("--payloads", type=int, default=20_000, help="per phase 1; phase 2: /4")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timeout", type=float, default=5.0, help="seconds per query")
+    parser.add_argument(
+        "--arenas", type=int, nargs="+", default=[1, 3], help="one campaign per server size"
+    )
     args = parser.parse_args()
-    port = free_port()
-    server = Server(port, "--time-scale", "0").wait_ready()
-    raw = Raw(port)
-    try:
-        t0 = time.perf_counter()
-        open_phase = fire(raw, payloads(args.seed, args.payloads), args.timeout)
-        owned = owner_phase(port, raw, args.seed + 1, args.payloads // 4, args.timeout)
-        raw.send(msgpack.packb({"v": 1, "type": "close", "session": "fuzz"}), 1.0)
-        fresh = fresh_episode_matches(port)
-        elapsed = time.perf_counter() - t0
-        alive = server.proc.poll() is None
-    finally:
-        raw.close()
-        server.stop()
-    rows = [
-        {"phase": "no owner", **open_phase, "broken": broken(open_phase["codes"])},
-        {"phase": "owner holds an episode", **owned, "broken": broken(owned["codes"])},
-    ]
+    t0 = time.perf_counter()
+    runs = [campaign(k, args.payloads, args.seed + 10 * k, args.timeout) for k in args.arenas]
+    elapsed = time.perf_counter() - t0
+    rows = [row for run in runs for row in run["rows"]]
     for row in rows:
-        print(f"{row['phase']}: {row['codes']}")
-    print(table(rows, ["phase", "sent", "broken", "max_latency_s"]))
-    print(f"owner's episode intact: {owned['owner_intact']}; fresh episode identical: {fresh}; "
-          f"server alive: {alive}; {elapsed:.0f} s")  # fmt: skip
-    ok = alive and fresh and owned["owner_intact"] and not any(r["broken"] for r in rows)
-    report = {"seed": args.seed, "timeout_s": args.timeout, "phases": rows,
-              "fresh_episode_identical": fresh, "server_alive": alive, "ok": ok,
+        print(f"{row['arenas']} arena(s), {row['phase']}: {row['codes']}")
+    print(table(rows, ["arenas", "phase", "sent", "broken", "max_latency_s"]))
+    for k, run in zip(args.arenas, runs, strict=True):
+        print(f"{k} arena(s): owner's episodes intact: {run['rows'][1]['owner_intact']}; "
+              f"fresh episodes identical: {run['fresh_identical']}; "
+              f"server alive: {run['server_alive']}")  # fmt: skip
+    ok = all(run["ok"] for run in runs)
+    print(f"{'all promises kept' if ok else 'A PROMISE BROKE'}; {elapsed:.0f} s")
+    report = {"seed": args.seed, "timeout_s": args.timeout, "campaigns": runs, "ok": ok,
               "elapsed_s": elapsed, "machine": machine(),
               "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}  # fmt: skip
     print(f"wrote {write_json('fuzz', report)}")

@@ -15,11 +15,13 @@ from .conftest import Server
 TIMEOUT = 5.0
 
 
-@pytest.fixture(scope="module")
-def raw(start_server: Callable[..., Server]) -> Iterator[tuple[Server, Raw]]:
-    server = start_server()
+@pytest.fixture(scope="module", params=[1, 3], ids=["one-arena", "vector"])
+def raw(
+    start_server: Callable[..., Server], request: pytest.FixtureRequest
+) -> Iterator[tuple[Server, Raw, int]]:
+    server = start_server("--arenas", str(request.param))
     client = Raw(server.port)
-    yield server, client
+    yield server, client, request.param
     client.close()
 
 
@@ -29,24 +31,24 @@ def test_the_generator_is_deterministic_and_mixed() -> None:
     assert any(p.startswith(b"\x80") for p in first)  # pickles are among them
 
 
-def test_every_fuzzed_payload_gets_a_typed_reply(raw: tuple[Server, Raw]) -> None:
-    server, client = raw
-    result = fire(client, payloads(seed=7, count=1500), TIMEOUT)
+def test_every_fuzzed_payload_gets_a_typed_reply(raw: tuple[Server, Raw, int]) -> None:
+    server, client, arenas = raw
+    result = fire(client, payloads(seed=7, count=1500, arenas=arenas), TIMEOUT)
     assert result["sent"] == 1500
     assert broken(result["codes"]) == 0, result["codes"]
     assert result["max_latency_s"] < TIMEOUT
     assert server.proc.poll() is None
 
 
-def test_fuzzing_beside_an_owner_leaves_its_episode_alone(raw: tuple[Server, Raw]) -> None:
-    server, client = raw
+def test_fuzzing_beside_an_owner_leaves_its_episodes_alone(raw: tuple[Server, Raw, int]) -> None:
+    server, client, arenas = raw
     client.send(encode_request(Close(), "fuzz"), 1.0)  # in case the fuzz claimed the server
-    result = owner_phase(server.port, client, seed=8, count=400, timeout=TIMEOUT)
+    result = owner_phase(server.port, client, seed=8, count=400, timeout=TIMEOUT, arenas=arenas)
     assert result["owner_intact"], result
     assert broken(result["codes"]) == 0, result["codes"]
 
 
-def test_after_fuzzing_a_new_episode_equals_a_fresh_arena(raw: tuple[Server, Raw]) -> None:
-    server, client = raw
+def test_after_fuzzing_new_episodes_equal_fresh_arenas(raw: tuple[Server, Raw, int]) -> None:
+    server, client, arenas = raw
     client.send(encode_request(Close(), "fuzz"), 1.0)
-    assert fresh_episode_matches(server.port, decisions=20)
+    assert fresh_episode_matches(server.port, decisions=20, arenas=arenas)
