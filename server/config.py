@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.server.contexts import level_error, level_value
 
 ACTION_SPACES = ("abstract", "discrete", "continuous")
 MODES = ("cooperative", "competitive", "bots")
@@ -23,7 +24,6 @@ OBSERVABILITY = ("full", "partial")
 REWARDS = ("dense", "sparse")
 SPAWNS = ("random", "corners")
 HIT_MODES = ("expected", "sampled")
-LEVEL_NAMES = ("easy", "middle", "hard", "random")
 
 
 @dataclass(frozen=True)
@@ -40,8 +40,10 @@ class ArenaConfig:
     mode: str = "cooperative"
     """"cooperative": the caller drives blue, a bot drives red; "competitive": the caller
     drives both (blue agents first); "bots": bots drive both (for matches)."""
-    blue_level: str = "easy"
-    """The bot that drives blue in "bots" mode (red's bot is the ``level`` context)."""
+    blue_level: int | str = "easy"
+    """The bot that drives blue in "bots" mode (red's bot is the ``level`` context); the same
+    values as ``level``: the released build's 0 or 1, or a name (easy, middle, hard, random,
+    middle_spread, hard_flank; docs/contexts.md, "Bots")."""
     decision_steps: int | None = None
     """Physics steps per decision; None → 20 (0.4 s), or 5 for discrete as released."""
     episode_steps: int = 1000
@@ -86,12 +88,15 @@ class ArenaConfig:
             ("reward", REWARDS),
             ("spawn", SPAWNS),
             ("hit_mode", HIT_MODES),
-            ("blue_level", LEVEL_NAMES),
         ):
             if getattr(self, name) not in choices:
                 raise InvalidOptionError(
                     f"option {name}={getattr(self, name)!r} is not valid; choose one of {choices}"
                 )
+        level = level_value(self.blue_level)
+        if level is None:
+            raise InvalidOptionError(level_error("option blue_level", self.blue_level))
+        object.__setattr__(self, "blue_level", level)  # 1.0 → 1, as for the level context
         _check_int(self, "n_blue", 1, 3)
         _check_int(self, "n_red", 1, 3)
         _check_int(self, "episode_steps", 1, 100_000)

@@ -10,6 +10,7 @@ episode is described completely by its seed and contexts.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -51,16 +52,17 @@ OTHER_KEYS: tuple[ContextKey, ...] = (
     ContextKey("opponent_hp", 600.0, 1.0, 10000.0, "starting HP of each red robot"),
     ContextKey("opponent_speed", 1.0, 0.1, 3.0, "multiplies the red robots' velocity commands"),
 )
-LEVELS: dict[Any, str] = {
-    0: "easy",
-    1: "middle",
-    2: "hard",
-    "easy": "easy",
-    "middle": "middle",
-    "hard": "hard",
-    "random": "random",
-}
-"""Accepted ``level`` values: numbers 0/1/2 (also as floats) or names."""
+RELEASED_LEVELS: tuple[int, ...] = (0, 1)
+"""The released build's ``level`` numbers: 0 = a random live target and random candidate
+point per robot, redrawn each decision; 1 = the least-HP target, each robot from its own
+nearest candidate point. Given as numbers (ints, or floats with an integer value such as
+``1.0``, as the released scripts pass them)."""
+LEVEL_NAMES: tuple[str, ...] = ("easy", "middle", "hard", "random", "middle_spread", "hard_flank")
+"""Named ``level`` values: the paper's easy, middle and hard bots taken literally; random
+(the released level 0's rule); this project's variants middle_spread and hard_flank
+(docs/contexts.md, "Bots")."""
+LEVEL_CHOICES: tuple[int | str, ...] = (*RELEASED_LEVELS, *LEVEL_NAMES)
+"""Every value ``level`` accepts, with its type (as the context table advertises them)."""
 DEFAULT_LEVEL = "easy"
 OPPONENT_PREFIX = "opponent."
 
@@ -77,8 +79,12 @@ class EpisodeContext:
     red_dynamics: dict[str, float] = field(default_factory=dict)
     """ChassisParams keyword values for red robots (speed scaling included)."""
     coef: float = 1.0
+    """Multiplies the damage the red team deals, [0, 10]; the paper's authors trained with 0.5."""
     opponent_hp: float = 600.0
-    level: str = DEFAULT_LEVEL
+    """Starting HP of each red robot, [1, 10000]."""
+    level: int | str = DEFAULT_LEVEL
+    """Red's bot: a released level number (0, 1; a float such as ``1.0`` becomes the int) or a
+    name from :data:`LEVEL_NAMES`."""
 
     def to_dict(self) -> dict[str, Any]:
         """The contexts as given to reset (released names), for records and replays."""
@@ -95,8 +101,19 @@ class EpisodeContext:
         return out
 
 
+LEVEL_DOC = (
+    "opponent bot: the released build's levels 0 (random target and point) and 1 (least-HP "
+    "target, each robot's nearest point; the same rule as middle), the paper's easy, middle, "
+    "hard, random (= 0), or this project's variants middle_spread, hard_flank"
+)
+
+
 def context_table() -> list[dict[str, Any]]:
-    """The table of keys, defaults, ranges and meanings (served to remote clients)."""
+    """The table of keys, defaults, ranges and meanings (served to remote clients).
+
+    The ``level`` row's ``choices`` are exactly the values ``reset`` accepts, with their
+    types: the ints 0 and 1 and the names (a float such as ``1.0`` is accepted as 1 too).
+    """
     rows = [
         {"key": name, "default": k.default, "min": k.lo, "max": k.hi, "doc": k.doc}
         for name, k in CONTEXT_TABLE.items()
@@ -105,8 +122,8 @@ def context_table() -> list[dict[str, Any]]:
         {
             "key": "level",
             "default": DEFAULT_LEVEL,
-            "choices": sorted(map(str, LEVELS)),
-            "doc": "opponent bot: 0/easy, 1/middle, 2/hard, or random",
+            "choices": list(LEVEL_CHOICES),
+            "doc": LEVEL_DOC,
         }
     )
     return rows
@@ -166,13 +183,52 @@ def _check_value(key: str, value: Any, spec: ContextKey) -> float:
     return value
 
 
-def _parse_level(value: Any) -> str:
-    key = value
-    if isinstance(value, float) and value.is_integer():
-        key = int(value)
-    if isinstance(key, bool) or not isinstance(key, (int, str)) or key not in LEVELS:
-        raise InvalidContextError(
-            f"context 'level'={value!r} is not valid; choose 0, 1, 2 or one of "
-            f"{sorted(k for k in LEVELS if isinstance(k, str))}"
-        )
-    return LEVELS[key]
+def level_value(value: Any) -> int | str | None:
+    """``value`` as a level (:data:`LEVEL_CHOICES`), or None when it is not one.
+
+    Numbers mean the released build's levels: an int, or a float with an integer value
+    (``1.0`` → 1); booleans are not numbers here. Strings must be names: the strings "0" and
+    "1" are refused (the released scripts pass numbers; the context table advertises ints).
+    """
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral):
+        if not float(value).is_integer():
+            return None
+        value = int(value)
+    if isinstance(value, numbers.Integral):
+        return int(value) if int(value) in RELEASED_LEVELS else None
+    if isinstance(value, str) and value in LEVEL_NAMES:
+        return value
+    return None
+
+
+def level_error(field: str, value: Any) -> str:
+    """The message for a bad level: names ``field`` and lists every valid value."""
+    hint = ""
+    if isinstance(value, str) and value.strip() in ("0", "1"):
+        hint = f" (give the released level as the number {value.strip()}, not a string)"
+    elif isinstance(value, (int, float)) and not isinstance(value, bool) and value == 2:
+        hint = " (the released build had no level 2; the paper's hard bot is 'hard')"
+    return (
+        f"{field}={value!r} is not valid{hint}; valid: the released build's levels "
+        f"{list(RELEASED_LEVELS)} as numbers, or a name: {list(LEVEL_NAMES)} "
+        "(the paper's bots are 'easy', 'middle' and 'hard')"
+    )
+
+
+LEVEL_ARGS: tuple[str, ...] = tuple(str(v) for v in LEVEL_CHOICES)
+"""The levels as typed on a command line (``neuronsmae-match --red 1``): "0" and "1" are the
+released numbers there, since a command line has only strings."""
+
+
+def level_from_arg(text: str) -> int | str:
+    """A command-line level (one of :data:`LEVEL_ARGS`) as the value ``reset`` takes."""
+    return int(text) if text in ("0", "1") else text
+
+
+def _parse_level(value: Any) -> int | str:
+    level = level_value(value)
+    if level is None:
+        raise InvalidContextError(level_error("context 'level'", value))
+    return level

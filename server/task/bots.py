@@ -2,32 +2,34 @@
 
 A bot sees the true scene (the referee's view) and, like an abstract-action agent, picks for
 each of its robots a target enemy and one of the candidate points around that enemy; the
-planner and chassis then drive it exactly as they drive a learning agent. Levels:
+planner and chassis then drive it exactly as they drive a learning agent. Every bot decides
+afresh at every decision. Where each rule comes from (docs/contexts.md, "Bots"):
 
-* random — a random live target and point, re-drawn each decision (the released level 0);
-* easy   — attack the nearest enemy from the candidate point nearest to itself;
-* middle — the team attacks the enemy with the least HP, each robot from a candidate point
-  near itself: the nearest one, or, as both robots share the target, the pair of points with
-  the least total travel that does not crowd them onto one spot;
-* hard   — both robots besiege the least-HP enemy (the same target and tie-break as middle):
-  the robot the target is facing holds its front from the nearest candidate point, and the
-  other takes the candidate point most behind the target, where the side and rear plates
-  take 2× and 3× damage.
-
-Nearly every shot lands within 3 m and bullets run out before the time limit, so what a
-bullet is worth depends on the plate it hits; the hard bot's edge is its flanker's plates.
-Middle keeps the paper's rule: the team focuses the least-HP enemy, ties (equal HP, as at
-the start) going to the enemy nearest the whole team, so both robots pick the same one; why
-its two robots do not share one point is told in :class:`MiddleBot`.
+* released build, level ``0`` (also the name ``random``) — :class:`RandomBot`: a random
+  live target and a random candidate point per robot, drawn from the arena's RNG;
+* released build, level ``1``, and the paper's ``middle`` — :class:`MiddleBot`: attack the
+  live enemy with the least HP (a plain argmin over the enemies in order: ties go to the
+  first), each robot from its own nearest candidate point of that enemy. The released
+  level's description and the paper's sentence give the same rule, so both share this class;
+* the paper's ``easy`` — :class:`EasyBot`: each robot attacks its nearest live enemy from
+  its own nearest candidate point of that enemy;
+* the paper's ``hard`` — :class:`HardBot`: "two robots siege the robot with the least HP at
+  the best candidate points"; the least-HP rule is middle's, and "best" is defined there;
+* this project's variants, never the default for a paper name — :class:`MiddleSpreadBot`
+  (``middle_spread``: middle whose two robots do not share one point) and
+  :class:`HardFlankBot` (``hard_flank``: a holder in front, a flanker behind).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
+from neuronsmae.server.sim import field as F
+from neuronsmae.server.sim.shots import hit_factor, select_shots, with_trig
 from neuronsmae.server.task.candidates import ROBOT_CLEARANCE
 
 
@@ -53,24 +55,41 @@ class BotView:
 Choice = tuple[int, int]
 """(enemy position in ``view.enemies``, candidate index)."""
 
+
+class Bot(Protocol):
+    """What the arena asks of a bot: one choice per robot of its team at each decision."""
+
+    def act(self, view: BotView) -> list[Choice]: ...
+
+
 CROWDING = 2 * ROBOT_CLEARANCE
 """Two points closer than this in both x and y (m) crowd each other: the ±0.6 m squares the
-candidate filter keeps clear around a robot would overlap."""
+candidate filter keeps clear around a robot would overlap (``middle_spread``'s spacing)."""
 
 
 def _live(view: BotView) -> np.ndarray:
     return np.flatnonzero(view.alive[view.enemies])
 
 
+def _travel(view: BotView, i: int, e: int) -> np.ndarray:
+    """Straight-line distance (m) from bot robot ``i`` to each of its points around ``e``."""
+    return np.hypot(*(view.cands[i, e] - view.poses[view.robots[i], :2]).T)
+
+
 def _nearest_point(view: BotView, i: int, e: int) -> int:
-    pts = view.cands[i, e]
-    d = np.hypot(*(pts - view.poses[view.robots[i], :2]).T)
-    return int(np.argmin(d))
+    return int(np.argmin(_travel(view, i, e)))
 
 
 def _least_hp(view: BotView, live: np.ndarray) -> int:
-    """The live enemy with the least HP; ties go to the one nearest the whole team, so that
-    every robot of the team picks the same enemy and their fire is focused."""
+    """The live enemy with the least HP: a plain argmin over the live enemies in order, so
+    ties (equal HP, as at the start) go to the first of them and every robot of the team
+    picks the same enemy."""
+    return int(live[np.argmin(view.hp[view.enemies[live]])])
+
+
+def _least_hp_nearest_team(view: BotView, live: np.ndarray) -> int:
+    """The live enemy with the least HP; ties go to the one nearest the whole team (the
+    tie-break of this project's variants ``middle_spread`` and ``hard_flank``)."""
     mine = view.poses[view.robots[view.alive[view.robots]], :2]
     enemies = view.poses[view.enemies[live], :2]
     dist = np.hypot(*(enemies[:, None] - mine[None]).transpose(2, 0, 1)).sum(axis=1)
@@ -78,23 +97,10 @@ def _least_hp(view: BotView, live: np.ndarray) -> int:
     return int(live[keys[0]])
 
 
-def _uncrowded_pair(view: BotView, a: int, b: int, e: int) -> tuple[int, int] | None:
-    """Candidate points for bot robots ``a`` and ``b`` around enemy ``e``: the pair with the
-    least total travel that is not closer than :data:`CROWDING` in both x and y (None if
-    every pair is)."""
-    pa, pb = view.cands[a, e], view.cands[b, e]
-    da = np.hypot(*(pa - view.poses[view.robots[a], :2]).T)
-    db = np.hypot(*(pb - view.poses[view.robots[b], :2]).T)
-    apart = (np.abs(pa[:, None] - pb[None]) >= CROWDING).any(axis=2)
-    if not apart.any():
-        return None
-    cost = np.where(apart, da[:, None] + db[None], np.inf)
-    x, y = np.unravel_index(int(np.argmin(cost)), cost.shape)
-    return int(x), int(y)
-
-
 class RandomBot:
-    """Released level 0: random live target and random point."""
+    """Released level 0 (and ``random``): a random live target and a random candidate point
+    for each robot, redrawn at every decision from the arena's RNG (so reproducible per
+    seed)."""
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -106,7 +112,11 @@ class RandomBot:
 
 
 class EasyBot:
-    """Nearest enemy, nearest candidate point."""
+    """The paper's easy bot: "goes to the nearest candidate point to attack the nearest robot".
+
+    Each robot on its own: the live enemy nearest to it (ties: the first in order), and its
+    own nearest candidate point around that enemy.
+    """
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -122,24 +132,14 @@ class EasyBot:
 
 
 class MiddleBot:
-    """Least-HP enemy (nearest the team on ties), nearest candidate points that do not crowd.
+    """The paper's middle bot and the released build's level 1 (one rule, read literally).
 
-    The paper's middle level: the team focuses the enemy with the least HP, ties (equal HP, as
-    at the start) going to the enemy nearest the whole team so both robots pick the same one,
-    and each robot drives to a candidate point near itself. Taken literally, "each its own
-    nearest point" sends both robots to the same point or to neighbouring ones, so they meet
-    the target from one side: the target faces one of them and both hit its front plate (×1),
-    while the enemy left alone shoots at them. That literal bot won only about half its games
-    against the easy bot (0.495 and 0.515 over 200 episodes at seeds 0 and 1000).
-
-    So two robots on one target share out the candidate points: they take the pair with the
-    least total travel whose ±0.6 m clearance squares (the candidate filter's) do not overlap,
-    that is points at least :data:`CROWDING` apart in x or y; if no pair qualifies, each takes
-    its nearest. They then stand apart around the target, so whichever robot it does not face
-    often sees a side plate (×2). Against easy, that robot's side-plate hits went from about
-    94 to 125 per episode, and the win rate over 1600 episodes (seeds 0-199, 1000-1199, ...,
-    7000-7199) from 0.55 to 0.63. The choice looks only at travel, never at the target's
-    heading: this is not the hard bot's flanking, which sends one robot round to the rear.
+    Paper: "The middle bot goes to the nearest candidate point to attack the robot with the
+    least HP." Released level 1: least-HP target, each robot its own nearest point. The team
+    attacks the live enemy with the least HP, a plain argmin over the enemies in order, so
+    ties (equal HP, as at the start) go to the first enemy and both robots share the target;
+    each robot drives to its own nearest candidate point around it (two robots may pick the
+    same point; the planner keeps them from overlapping).
     """
 
     def __init__(self, rng: np.random.Generator) -> None:
@@ -147,6 +147,147 @@ class MiddleBot:
 
     def act(self, view: BotView) -> list[Choice]:
         e = _least_hp(view, _live(view))
+        return [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
+
+
+_STATIC_BOXES = F.obstacle_array(tall_only=True)
+"""The tall obstacles, the only static things that block a shot (the referee's blockers)."""
+
+
+def point_damage(points: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Expected damage per firing step (hit factor × plate multiplier) of a shooter standing
+    at each of ``points`` (n, 2) and facing ``target`` (x, y, yaw) as it stands now.
+
+    The referee's own shot rule (:func:`~neuronsmae.server.sim.shots.select_shots`) decides:
+    the nearest plate whose bearing is within ±0.52 rad of the shooter's heading, met at more
+    than 35° and not hidden by a tall obstacle; 0 when there is none. Only static obstacles
+    block here: robots move, the field does not.
+    """
+    n = len(points)
+    poses = np.empty((n + 1, 3))
+    poses[:n, :2] = points
+    poses[:n, 2] = np.arctan2(target[1] - points[:, 1], target[0] - points[:, 0])
+    poses[n] = target
+    targets = np.full(n + 1, n, dtype=np.int64)
+    targets[n] = -1
+    robots = np.zeros((n + 1, 6))  # robots do not block: zero-size, zero-height boxes
+    boxes = with_trig(np.concatenate([_STATIC_BOXES, robots]))
+    plate = np.empty(n + 1, dtype=np.int64)
+    dist = np.empty(n + 1)
+    select_shots(
+        poses, np.ones(n + 1, dtype=np.bool_), np.ones(n + 1), targets, boxes,
+        len(_STATIC_BOXES), F.ARMOR_TABLE, plate, dist,
+    )  # fmt: skip
+    return np.array(
+        [hit_factor(float(dist[j])) * F.ARMOR_TABLE[plate[j], 3] if plate[j] >= 0 else 0.0
+         for j in range(n)]
+    )  # fmt: skip
+
+
+class HardBot:
+    """The paper's hard bot: "makes two robots siege the robot with the least HP at the best
+    candidate points".
+
+    Target: middle's rule (the live enemy with the least HP, ties to the first), so the whole
+    team besieges one enemy.
+
+    "Best", from the task's own facts. A robot at a candidate point fires every physics step
+    at the nearest valid plate of its target; each step deals hit factor (1.0 below 3 m, 0.5
+    to 6 m, 0.2 beyond) × plate multiplier (front 1, side 2, rear 3). Candidate points have
+    line of sight to the target by construction, and the abstract action turns the chassis
+    toward the target, so its ±0.52 rad firing cone is met at every point: what differs
+    between points is the distance (all lie 2.5 m from the target, hit factor 1) and, above
+    all, which plate the target shows from there, set by the point's bearing from the
+    target's current heading. So a point's value is the damage per step the referee would
+    credit a shooter standing there now, :func:`point_damage` (a point behind the target
+    scores 3, beside it 2, in front 1); the same points lie outside the target's own firing
+    cone, which looks along its heading.
+
+    Two robots besieging attack from different points: the team's live robots take distinct
+    points that are not within one robot's ±0.6 m clearance square of each other (the
+    candidate filter's rule: a robot standing on one point removes the other), choosing the
+    combination with the most damage per step in total; ties (for example either side plate)
+    go to the least total travel, then to the first combination in order (robot, point
+    index). If no combination is far enough apart, each robot takes its own best point. A
+    lone survivor takes its best point. The value is read at the point, from the target's
+    heading at this decision; the bot re-decides at every decision, so when the target
+    turns, the points follow. No term was tuned against another bot.
+    """
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def act(self, view: BotView) -> list[Choice]:
+        e = _least_hp(view, _live(view))
+        target = view.poses[view.enemies[e]]
+        out = [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
+        alive = [i for i, r in enumerate(view.robots) if view.alive[r]]
+        if not alive:
+            return out
+        k = view.cands.shape[2]
+        pts = view.cands[alive, e]  # (n_alive, k, 2)
+        score = point_damage(pts.reshape(-1, 2), target).reshape(len(alive), k)
+        travel = np.stack([_travel(view, i, e) for i in alive])
+        for i, pick in zip(alive, _best_assignment(pts, score, travel), strict=True):
+            out[i] = (e, pick)
+        return out
+
+
+def _best_assignment(pts: np.ndarray, score: np.ndarray, travel: np.ndarray) -> list[int]:
+    """One point index per robot: the most total ``score`` among combinations whose points are
+    pairwise at least ``ROBOT_CLEARANCE`` apart in x or y, then the least total ``travel``,
+    then the first in order; if none is apart, each robot's own best (score, then travel)."""
+    n, k = score.shape
+    combos = np.stack(np.unravel_index(np.arange(k**n), (k,) * n), axis=1)  # (k^n, n), ordered
+    rows = np.arange(n)
+    apart = np.ones(len(combos), dtype=bool)
+    for a in range(n):
+        for b in range(a + 1, n):
+            gap = np.abs(pts[a, combos[:, a]] - pts[b, combos[:, b]])
+            apart &= (gap >= ROBOT_CLEARANCE).any(axis=1)
+    if not apart.any():
+        return [int(np.lexsort((travel[i], -score[i]))[0]) for i in range(n)]
+    total = score[rows, combos].sum(axis=1)
+    cost = travel[rows, combos].sum(axis=1)
+    keys = np.lexsort((np.arange(len(combos)), cost, -total))
+    best = int(next(j for j in keys if apart[j]))
+    return [int(c) for c in combos[best]]
+
+
+def _uncrowded_pair(view: BotView, a: int, b: int, e: int) -> tuple[int, int] | None:
+    """Candidate points for bot robots ``a`` and ``b`` around enemy ``e``: the pair with the
+    least total travel that is not closer than :data:`CROWDING` in both x and y (None if
+    every pair is)."""
+    pa, pb = view.cands[a, e], view.cands[b, e]
+    da, db = _travel(view, a, e), _travel(view, b, e)
+    apart = (np.abs(pa[:, None] - pb[None]) >= CROWDING).any(axis=2)
+    if not apart.any():
+        return None
+    cost = np.where(apart, da[:, None] + db[None], np.inf)
+    x, y = np.unravel_index(int(np.argmin(cost)), cost.shape)
+    return int(x), int(y)
+
+
+class MiddleSpreadBot:
+    """``middle_spread``, this project's variant of middle (not the paper's rule): least-HP
+    enemy (nearest the team on ties), nearest candidate points that do not crowd.
+
+    Taken literally, "each its own nearest point" often sends both robots to one point or to
+    neighbouring ones, so they meet the target from one side and both hit its front plate
+    (×1). Here two robots on one target share out the candidate points: the pair with the
+    least total travel whose ±0.6 m clearance squares (the candidate filter's) do not overlap,
+    that is points at least :data:`CROWDING` apart in x or y; if no pair qualifies, each takes
+    its nearest. They then stand apart around the target, so the robot it does not face often
+    sees a side plate (×2). The choice looks only at travel, never at the target's heading.
+    The spacing was chosen while comparing bots against the easy bot; the figures are in
+    docs/contexts.md.
+    """
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def act(self, view: BotView) -> list[Choice]:
+        e = _least_hp_nearest_team(view, _live(view))
         out = [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
         alive = [i for i, r in enumerate(view.robots) if view.alive[r]]
         if len(alive) == 2:
@@ -156,17 +297,17 @@ class MiddleBot:
         return out
 
 
-class HardBot:
-    """Both robots besiege the least-HP enemy: one holds its front, the other takes its rear.
+class HardFlankBot:
+    """``hard_flank``, this project's variant of hard (one reading of "besiege", not the
+    paper's "best points"): both robots take the least-HP enemy (nearest the team on ties);
+    one holds its front, the other takes its rear.
 
     A robot's chassis turns toward its own target, so the besieged enemy shows its front plate
-    (×1) to the robot it is facing and its side (×2) or rear (×3) plates to anyone behind it;
-    the shooter hits the nearest plate it can see. Most shots land within 3 m, so the plate,
-    not the range, decides how much each bullet is worth, and bullets run out before the time
-    limit. Roles per decision: the *holder* is the robot the target faces (the smaller angle
-    off its heading) and keeps it facing that way from the nearest candidate point; the
-    *flanker* takes the point most behind the target, a little discounted by travel, and
-    never the holder's point.
+    (×1) to the robot it is facing and its side (×2) or rear (×3) plates to anyone behind it.
+    Roles per decision: the *holder* is the robot the target faces (the smaller angle off its
+    heading) and keeps it facing that way from the nearest candidate point; the *flanker*
+    takes the point most behind the target, a little discounted by travel, and never the
+    holder's point. A lone survivor flanks.
     """
 
     TRAVEL = 0.1
@@ -178,7 +319,7 @@ class HardBot:
         self.rng = rng
 
     def act(self, view: BotView) -> list[Choice]:
-        e = _least_hp(view, _live(view))
+        e = _least_hp_nearest_team(view, _live(view))
         target = view.poses[view.enemies[e]]
         out = [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
         alive = [i for i, r in enumerate(view.robots) if view.alive[r]]
@@ -196,8 +337,7 @@ class HardBot:
         """The candidate point most behind the target's heading, less travel; not ``held``."""
         pts = view.cands[i, e]
         rel = np.arctan2(pts[:, 1] - target[1], pts[:, 0] - target[0]) - target[2]
-        travel = np.hypot(*(pts - view.poses[view.robots[i], :2]).T)
-        score = -np.cos(rel) - self.TRAVEL * travel
+        score = -np.cos(rel) - self.TRAVEL * _travel(view, i, e)
         if held is not None:
             score = score - 10.0 * (np.hypot(*(pts - held).T) < self.CLAIMED)
         return int(np.argmax(score))
@@ -209,15 +349,23 @@ def _off_heading(view: BotView, i: int, target: np.ndarray) -> float:
     return abs(float(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - target[2])))))
 
 
-BOTS: dict[str, Callable[[np.random.Generator], RandomBot | EasyBot | MiddleBot | HardBot]] = {
-    "random": RandomBot,
+BOTS: dict[str, Callable[[np.random.Generator], Bot]] = {
     "easy": EasyBot,
     "middle": MiddleBot,
     "hard": HardBot,
+    "random": RandomBot,
+    "middle_spread": MiddleSpreadBot,
+    "hard_flank": HardFlankBot,
 }
-"""Bot classes by level name; the ``level`` context picks one."""
+"""Bot classes by level name (the names of ``neuronsmae.server.contexts.LEVEL_NAMES``)."""
+
+RELEASED_BOTS: dict[int, Callable[[np.random.Generator], Bot]] = {0: RandomBot, 1: MiddleBot}
+"""Bot classes by the released build's level number (``RELEASED_LEVELS``)."""
 
 
-def make_bot(level: str, rng: np.random.Generator) -> RandomBot | EasyBot | MiddleBot | HardBot:
-    """A bot for ``level`` (one of ``BOTS``)."""
+def make_bot(level: int | str, rng: np.random.Generator) -> Bot:
+    """A bot for ``level``: a released number (0, 1) or a name (one of ``BOTS``), as
+    normalised by :func:`neuronsmae.server.contexts.parse_contexts`."""
+    if isinstance(level, int):
+        return RELEASED_BOTS[level](rng)
     return BOTS[level](rng)

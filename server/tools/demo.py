@@ -12,18 +12,19 @@ import time
 from collections.abc import Sequence
 
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.config import LEVEL_NAMES
+from neuronsmae.server.contexts import LEVEL_ARGS, level_from_arg
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point."""
     parser = argparse.ArgumentParser(prog="neuronsmae-demo", description=__doc__.split("\n")[0])
-    parser.add_argument("--blue", default="hard", choices=LEVEL_NAMES)
-    parser.add_argument("--red", default="easy", choices=LEVEL_NAMES)
+    parser.add_argument("--blue", default="hard", choices=LEVEL_ARGS, help="blue bot level")
+    parser.add_argument("--red", default="easy", choices=LEVEL_ARGS, help="red bot level")
     parser.add_argument("--seed", type=int, default=1234)
     args = parser.parse_args(argv)
-    with Arena(seed=args.seed, mode="bots", blue_level=args.blue) as arena:
-        arena.reset({"level": args.red})
+    blue_level = level_from_arg(args.blue)
+    with Arena(seed=args.seed, mode="bots", blue_level=blue_level) as arena:
+        arena.reset({"level": level_from_arg(args.red)})
         start, decisions, done, info = time.perf_counter(), 0, False, {}
         while not done:
             _, _, done, info = arena.step([])

@@ -3,11 +3,13 @@
     neuronsmae-match --blue hard --red easy --episodes 200 --seed 0 [--json]
                      [--record DIR] [--gif OUT.gif]
 
-``--blue`` and ``--red`` take a bot level (easy, middle, hard, random). ``--blue`` may also
-be a path to a trained checkpoint: the policy is loaded through the ``neuronsmae.policies``
-entry-point group (the trainers register theirs), so the server package never imports the
-trainers. Episode ``i`` uses seed ``seed + i``, so two runs with the same arguments give the
-same numbers. ``--record DIR`` writes every episode as a replayable recording
+``--blue`` and ``--red`` take a bot level: the released build's ``0`` and ``1``, the paper's
+``easy``, ``middle``, ``hard``, or ``random``, ``middle_spread``, ``hard_flank`` (the table is
+in docs/contexts.md, "Bots"). ``--blue`` may also be a path to a trained checkpoint: the
+policy is loaded through the ``neuronsmae.policies`` entry-point group (the trainers register
+theirs), so the server package never imports the trainers. Episode ``i`` uses seed
+``seed + i``, so two runs with the same arguments give the same numbers. ``--record DIR``
+writes every episode as a replayable recording
 (``neuronsmae-replay``); ``--gif OUT`` draws the first episode.
 """
 
@@ -32,7 +34,7 @@ from neuronsmae.protocol.recording import (
     decision_hash,
 )
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.config import LEVEL_NAMES
+from neuronsmae.server.contexts import LEVEL_ARGS, level_from_arg
 from neuronsmae.server.tools.video import write_video
 
 Z95 = 1.959963984540054
@@ -99,11 +101,13 @@ def play(
     """Play ``episodes`` and return the counts, rates and 95% intervals.
 
     ``record``: a directory to write every episode's recording to; ``gif``: a file to draw
-    the first episode in (one frame per decision).
+    the first episode in (one frame per decision). ``blue`` and ``red`` are levels as typed
+    on the command line (:data:`LEVEL_ARGS`: "0" and "1" are the released levels); ``blue``
+    may be a checkpoint path instead.
     """
     policy = None
-    if blue in LEVEL_NAMES:
-        arena = Arena(seed=seed, mode="bots", blue_level=blue, **options)
+    if blue in LEVEL_ARGS:
+        arena = Arena(seed=seed, mode="bots", blue_level=level_from_arg(blue), **options)
     else:
         policy = load_policy(blue)
         arena = Arena(seed=seed, **(policy.options | options))
@@ -111,7 +115,7 @@ def play(
     writer: RecordingWriter | None = None
     try:
         for i in range(episodes):
-            contexts = {"level": red}
+            contexts = {"level": level_from_arg(red)}
             obs = arena.reset(contexts, seed=seed + i)
             if policy is not None:
                 policy.reset()
@@ -157,9 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point."""
     parser = argparse.ArgumentParser(prog="neuronsmae-match", description=__doc__.split("\n")[0])
     parser.add_argument(
-        "--blue", default="hard", help=f"bot level {LEVEL_NAMES} or a checkpoint path"
+        "--blue", default="hard", help=f"bot level {list(LEVEL_ARGS)} or a checkpoint path"
     )
-    parser.add_argument("--red", default="easy", choices=LEVEL_NAMES, help="red bot level")
+    parser.add_argument("--red", default="easy", choices=LEVEL_ARGS, help="red bot level")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -171,8 +175,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--gif", type=Path, metavar="OUT", help="draw the first episode as a GIF")
     args = parser.parse_args(argv)
-    if args.blue not in LEVEL_NAMES and not Path(args.blue).exists():
-        parser.error(f"--blue must be one of {LEVEL_NAMES} or an existing checkpoint path")
+    if args.blue not in LEVEL_ARGS and not Path(args.blue).exists():
+        parser.error(f"--blue must be one of {list(LEVEL_ARGS)} or an existing checkpoint path")
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     if args.gif is not None and args.gif.suffix.lower() != ".gif":

@@ -21,3 +21,12 @@ def test_every_context_key_is_documented() -> None:
     text = (DOCS / "contexts.md").read_text()
     for key in [*CONTEXT_TABLE, "level"]:
         assert f"`{key}`" in text, key
+
+
+def test_every_level_value_has_a_row_in_the_bots_table() -> None:
+    from neuronsmae.server.contexts import LEVEL_CHOICES
+
+    text = (DOCS / "contexts.md").read_text()
+    bots = text[text.index("## Bots") :]
+    for level in LEVEL_CHOICES:
+        assert f"\n| `{level}`" in bots, level

@@ -20,9 +20,9 @@ from neuronsmae.protocol.recording import (
     write_recording,
 )
 from neuronsmae.server import Arena
+from neuronsmae.server.render import size as render_size
 from neuronsmae.server.tools import match as M
 from neuronsmae.server.tools import replay as R
-from neuronsmae.server.render import size as render_size
 
 SEED, EPISODE_SEED = 5, 77
 CONTEXTS = {"level": "middle"}
