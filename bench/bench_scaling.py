@@ -1,13 +1,15 @@
 """Sampling throughput with 1, 2, 4 and 8 servers on one machine, and a cluster projection.
 
-    python -m bench.bench_scaling [--counts 1 2 4 8] [--seconds 8] [--repeats 3]
+    python -m bench.bench_scaling [--counts 1 2 4 8] [--envs 8] [--seconds 8] [--repeats 3]
 
 Starts the largest number of servers once with the fleet supervisor (``neuronsmae-serve``'s
-:class:`~neuronsmae.server.serving.supervisor.Fleet`, unpaced: ``time_scale=0``). For each count
-``n`` and each repeat, ``n`` client processes (spawned, one per server, like rollout
-workers) open ``RM(port=..., launch=False)`` on the training task (abstract actions,
-cooperative 2 v 2), warm up, meet at a barrier, then play random allowed actions for
-``--seconds``. The aggregate rate is the sum of the clients' decisions/s; the table reports
+:class:`~neuronsmae.server.serving.supervisor.Fleet`, unpaced: ``time_scale=0``), each
+holding ``--envs`` arenas (``--arenas``; 1 measures the one-query-per-decision path). For
+each count ``n`` and each repeat, ``n`` client processes (spawned, one per server, like
+rollout workers) open ``VecRM(port=..., num_envs=envs, launch=False)`` on the training task
+(abstract actions, cooperative 2 v 2), warm up, meet at a barrier, then play random
+allowed actions in every arena for ``--seconds``; a decision is one arena advancing once.
+The aggregate rate is the sum of the clients' decisions/s; the table reports
 the median over repeats, with the CPU seconds that servers and clients spent per decision
 (psutil for the servers, ``process_time`` for the clients) and the load average.
 
@@ -33,7 +35,7 @@ import numpy as np
 import psutil
 
 from bench.common import machine, table, write_json
-from neuronsmae.client import RM
+from neuronsmae.client import VecRM
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec
 
 OPTIONS: dict[str, Any] = {
@@ -47,16 +49,15 @@ WARMUP_DECISIONS = 10
 PROJECT_TO = (20, 25)
 
 
-def drive(port: int, seed: int, seconds: float, barrier: Barrier, out: Any) -> None:
-    """One client process: random allowed actions on its server for ``seconds``."""
+def drive(port: int, envs: int, seed: int, seconds: float, barrier: Barrier, out: Any) -> None:
+    """One client process: random allowed actions in its server's arenas for ``seconds``."""
     rng = np.random.default_rng(seed)
-    env = RM(seed=seed, port=port, launch=False, timeout=60.0, **OPTIONS)
+    env = VecRM(seed=seed, port=port, num_envs=envs, launch=False, timeout=60.0, **OPTIONS)
     try:
 
         def step() -> None:
-            actions = [int(rng.choice(np.flatnonzero(m))) for m in env.get_avail_actions()]
-            if env.step(actions)[2]:
-                env.reset()
+            avail = env.get_avail_actions()
+            env.step((avail * rng.random(avail.shape)).argmax(-1))  # arenas autoreset
 
         env.reset()
         for _ in range(WARMUP_DECISIONS):
@@ -65,7 +66,7 @@ def drive(port: int, seed: int, seconds: float, barrier: Barrier, out: Any) -> N
         done, cpu, start = 0, time.process_time(), time.perf_counter()
         while time.perf_counter() - start < seconds:
             step()
-            done += 1
+            done += envs
         wall = time.perf_counter() - start
         out.put({"port": port, "decisions": done, "wall": wall, "cpu": time.process_time() - cpu})
     finally:
@@ -76,12 +77,14 @@ def cpu_seconds(procs: list[psutil.Process]) -> float:
     return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
 
 
-def one_round(ports: list[int], seconds: float, seed: int) -> dict[str, Any]:
+def one_round(ports: list[int], envs: int, seconds: float, seed: int) -> dict[str, Any]:
     """All clients at once, started together; aggregate rate and CPU per decision."""
     ctx = mp.get_context("spawn")  # never fork: this process and the clients use Zenoh
     barrier, out = ctx.Barrier(len(ports) + 1), ctx.Queue()
     clients = [
-        ctx.Process(target=drive, args=(port, seed + i, seconds, barrier, out), daemon=True)
+        ctx.Process(
+            target=drive, args=(port, envs, seed + i * envs, seconds, barrier, out), daemon=True
+        )
         for i, port in enumerate(ports)
     ]
     for client in clients:
@@ -110,20 +113,23 @@ def _serves(proc: psutil.Process, ports: list[int]) -> bool:
     return "neuronsmae.server" in cmd and any(str(p) in cmd for p in ports)
 
 
-def measure(counts: list[int], seconds: float, repeats: int, base_port: int) -> list[dict]:
-    spec = FleetSpec(base_port=base_port, count=max(counts), seed=1, time_scale=0.0)
+def measure(
+    counts: list[int], envs: int, seconds: float, repeats: int, base_port: int
+) -> list[dict]:
+    spec = FleetSpec(base_port=base_port, count=max(counts), seed=1, time_scale=0.0, arenas=envs)
     rows = []
     with tempfile.TemporaryDirectory() as tmp, Fleet(spec, Path(tmp), Path(tmp) / "s.json") as f:
         f.start()
         if not all(h.up for h in f.check()):
             raise RuntimeError("not every server answers; see the logs in " + tmp)
         for n in counts:
-            rounds = [one_round(spec.ports()[:n], seconds, 100 * r) for r in range(repeats)]
+            rounds = [one_round(spec.ports()[:n], envs, seconds, 100 * r) for r in range(repeats)]
             rates = [r["rate"] for r in rounds]
             cpu = statistics.median(r["cpu_per_decision"] for r in rounds)
             rows.append(
                 {
                     "servers": n,
+                    "envs_per_server": envs,
                     "decisions_per_s": round(statistics.median(rates), 1),
                     "min": round(min(rates), 1),
                     "max": round(max(rates), 1),
@@ -156,14 +162,15 @@ def projection(rows: list[dict]) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--counts", type=int, nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument("--envs", type=int, default=8, help="arenas per server (8)")
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--base-port", type=int, default=18000)
     args = parser.parse_args()
     load_before = os.getloadavg()
-    rows = measure(sorted(args.counts), args.seconds, args.repeats, args.base_port)
+    rows = measure(sorted(args.counts), args.envs, args.seconds, args.repeats, args.base_port)
     proj = projection(rows)
-    columns = ["servers", "decisions_per_s", "min", "max", "per_server"]
+    columns = ["servers", "envs_per_server", "decisions_per_s", "min", "max", "per_server"]
     columns += ["cpu_ms_per_decision", "load1"]
     print(table(rows, columns))
     print(table(proj, ["workers", "cpu_bound_decisions_per_s", "at_measured_single_rate"]))
