@@ -7,7 +7,7 @@ valid episode after any of them:
   nearest point), not by index, so the enemy called 0 could as well have been called 1
   (up to ties); actions ``4j + k`` become ``4(1 − j) + k``.
 * ``field`` turns the whole scene half a turn about the field's centre. The layout is
-  centrally symmetric (reference.md, "Arena"; the obstacles to within 2 cm, the spawn
+  centrally symmetric (``docs/reference.md``, "Arena"; the obstacles to within 2 cm, the spawn
   ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
   becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative`` and
   ``exposure`` features are built from differences of positions and of angles, so they do

@@ -1,6 +1,6 @@
 """Mecanum chassis model: commanded body velocity → actual body velocity, per physics step.
 
-This is the sim-to-real part of the robot (``shared/spec/reference.md``, "Chassis dynamics"):
+This is the sim-to-real part of the robot (``docs/reference.md``, "Chassis model"):
 the rigid body in PyBullet is driven by the velocity this model produces, not by the raw
 command, so that robots accelerate, brake and undershoot like the released build's wheels.
 It runs for all N robots at once in one numba kernel, because the arena calls it every physics

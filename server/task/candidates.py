@@ -1,7 +1,7 @@
 """Candidate shooting points around an enemy: the abstract action space's targets.
 
 The abstract action picks an enemy and one of ``k`` points to drive to. Following the
-released build (``shared/spec/reference.md``, "Candidate points"): sample ``n_samples``
+released build (``docs/reference.md``, "Candidate points"): sample ``n_samples``
 points evenly on a circle of ``radius`` (2.5 m, the best shooting distance) around the
 enemy; drop those outside ``x ∈ [0.2, 7.8], y ∈ [0.2, 4.0]``, inside an obstacle grown by
 the robot's half-size (0.30 m), inside the ±0.6 m square around another robot, or without
