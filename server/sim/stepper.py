@@ -20,9 +20,9 @@ arena's zones option, whose effects change commands and targets between steps. T
 are the same functions the stand-alone ``Chassis.step``, ``World.step`` and
 ``Referee.physics_step`` use, so all paths give identical results.
 
-numba's on-disk cache keys a kernel on its own file only: after editing chassis.py, world.py,
-shots.py or task/control.py, delete ``server/sim/__pycache__/stepper.*.nb[ic]`` or these
-kernels keep the old code.
+These kernels compile in the functions of chassis.py, world.py, shots.py and task/control.py;
+numba's cache is keyed on all of those sources (:mod:`.kernel_cache`), so editing any of them
+recompiles these too.
 """
 
 from __future__ import annotations

@@ -39,9 +39,6 @@ import numpy as np
 from neuronsmae.server.sim.field import SPAWN_OBSTACLE_MARGIN
 from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, point_in_grown_box, slab_clip
 
-# numba's on-disk cache keys a kernel on its own file only: after editing geometry.py,
-# delete server/task/__pycache__/candidates.*.nb[ic] or these kernels keep the old code.
-
 RADIUS = 2.5
 """Circle radius (m): the best shooting distance (hit factor 1 below 3 m)."""
 N_SAMPLES = 180
