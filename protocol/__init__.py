@@ -5,8 +5,10 @@ This package is the only code the server and the client have in common.
 
 from __future__ import annotations
 
+from neuronsmae.protocol.env_info import V_MAX, W_MAX, EnvInfo, ObsLayout, StateLayout
 from neuronsmae.protocol.errors import (
     BusyError,
+    EnvInfoError,
     InvalidActionError,
     InvalidContextError,
     InvalidOptionError,
@@ -21,16 +23,22 @@ from neuronsmae.protocol.errors import (
 from neuronsmae.protocol.interface import ArenaAPI
 
 __all__ = [
+    "V_MAX",
+    "W_MAX",
     "ArenaAPI",
     "BusyError",
+    "EnvInfo",
+    "EnvInfoError",
     "InvalidActionError",
     "InvalidContextError",
     "InvalidOptionError",
     "MalformedMessageError",
     "MessageTooLargeError",
     "NeuronsMAEError",
+    "ObsLayout",
     "ResetNeededError",
     "ServerError",
     "ServerUnavailableError",
+    "StateLayout",
     "VersionMismatchError",
 ]

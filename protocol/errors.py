@@ -99,7 +99,7 @@ def error_from_code(code: str, message: str) -> NeuronsMAEError:
     return ERRORS.get(code, ServerError)(message)
 
 
-# --- recordings (local files, never sent over the wire, so not in ERRORS) -------------------
+# --- local errors (never sent over the wire, so not in ERRORS) ----------------------------
 
 
 class RecordingFormatError(NeuronsMAEError, ValueError):
@@ -118,6 +118,13 @@ class ReplayMismatchError(NeuronsMAEError):
     def __init__(self, message: str, decision: int = -1) -> None:
         super().__init__(message)
         self.decision = decision
+
+
+class EnvInfoError(NeuronsMAEError, ValueError):
+    """An env info dict (``get_env_info()``) lacks a key, has a value of the wrong type, or
+    gives sizes that do not fit its own layout."""
+
+    code = "bad_env_info"
 
 
 class MissingDependencyError(NeuronsMAEError, ImportError):
