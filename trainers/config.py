@@ -115,10 +115,6 @@ class TrainConfig:
     lr: float = 5e-4
     """Adam learning rate (paper: 5e-4). 1e-3 reaches 0.8 against the easy bot sooner but
     stays there; 5e-4 climbs higher (docs/results.md)."""
-    lr_final: float = -1.0
-    """Learning rate at the end of the run's budget, reached linearly from ``lr`` (negative:
-    keep ``lr`` constant). The budget is whichever of ``episodes`` and ``max_minutes`` runs out
-    first, so a wall-clock run and an episode-capped run both end at ``lr_final``."""
     gamma: float = 0.99
     """Discount (paper: 0.99)."""
     eps_start: float = 0.2
@@ -162,27 +158,13 @@ class TrainConfig:
     back faster."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
-    eval_ema: float = 0.0
-    """Rate τ of an exponential moving average of the agent's weights, taken after every
-    gradient step (average += τ·(weights − average)); 0 turns it off. When on, the average
-    is the policy that evaluations measure, ``best.pt`` keeps and checkpoints give to the
-    match command, while sampling keeps acting with the latest weights. Why: past the
-    plateau the latest weights wander between policies of equal quality that lose
-    different games, and averaging them behaves like an ensemble of the recent ones.
-    Measured against the easy bot with 0.001 (docs/results.md, run T): the highest
-    validation curve of any run, but 0.825 on the test split, no better than without."""
     features: str = "relative"
-    """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
-    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2),
-    exposure (relative, plus what each candidate point offers the other enemy; no better than
-    relative against the easy bot in 30 minutes, docs/results.md) or sight (exposure, plus
-    which tall walls stand between the robots and between each point and the other enemy;
-    0.86 against the easy bot, run X, no better either)."""
+    """Agent inputs: raw (the paper's: the observation as given) or relative (plus geometry
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2)."""
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
-    that scores each action from its enemy's and point's features; needs 'relative' or
-    'exposure'). On the easy bot it roughly doubles the greedy win rate after 500 episodes
-    (bench_learning)."""
+    that scores each action from its enemy's and point's features; needs 'relative'). On the
+    easy bot it roughly doubles the greedy win rate after 500 episodes (bench_learning)."""
     augment: str = "enemies,field,allies"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
     every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
@@ -194,24 +176,10 @@ class TrainConfig:
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
     """Give the agent network its one-hot agent index."""
-    ally_action_input: bool = False
-    """Give each agent its team-mates' one-hot last actions too: the enemy and candidate
-    point each mate is heading for, which its pose does not show. Decisions are
-    simultaneous, so without it an agent can only guess where its mate will be when
-    choosing a point that complements it. Executing such a policy on robots needs the mates
-    to share their last choice (one byte per decision). Against the easy bot, two seeds
-    tested at 0.87 and 0.79 (docs/results.md, runs U and V), no better than without."""
     buffer_size: int = 5000
     """Replay capacity in episodes."""
     batch_size: int = 32
     """Episodes per gradient update."""
-    priority_alpha: float = 0.0
-    """Prioritised replay: draw episodes with probability ∝ (mean |TD error| of their last
-    replay) ** α; 0 samples uniformly (the paper's and PyMARL's buffer). With 0.6 against
-    the easy bot the test split read 0.855 / 0.87 (docs/results.md, run Y), no better."""
-    priority_beta: float = 0.4
-    """Exponent of prioritised replay's importance weights at the start of the run; it rises
-    linearly to 1 over the budget, so late updates are unbiased."""
     learning_starts: int = 64
     """Episodes in the buffer before learning begins."""
     train_every: int = 1
@@ -281,11 +249,6 @@ class TrainConfig:
             raise ConfigError(f"lr must be > 0, got {self.lr}")
         if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
             raise ConfigError("eps_start and eps_end must lie in [0, 1]")
-        if self.priority_alpha < 0 or not 0.0 <= self.priority_beta <= 1.0:
-            raise ConfigError(
-                f"priority_alpha must be ≥ 0 (0 = uniform) and priority_beta in [0, 1], got "
-                f"{self.priority_alpha} and {self.priority_beta}"
-            )
         if not 0.0 <= self.start_replay <= 1.0:
             raise ConfigError(f"start_replay must lie in [0, 1] (0 = off), got {self.start_replay}")
         if self.start_replay_plays < 2 or self.start_replay_capacity < 1:
@@ -294,8 +257,6 @@ class TrainConfig:
                 f"start_replay_capacity ≥ 1, got {self.start_replay_plays} and "
                 f"{self.start_replay_capacity}"
             )
-        if not 0.0 <= self.eval_ema < 1.0:
-            raise ConfigError(f"eval_ema must lie in [0, 1) (0 = off), got {self.eval_ema}")
 
     @property
     def run_dir(self) -> Path:
@@ -306,25 +267,9 @@ class TrainConfig:
         """Worker count: as configured, else one per core less one for the learner (≥ 2)."""
         return self.workers or max(2, (os.cpu_count() or 2) - 1)
 
-    def lr_at(self, progress: float) -> float:
-        """The learning rate at ``progress`` ∈ [0, 1] of the budget (see ``lr_final``)."""
-        if self.lr_final < 0:
-            return self.lr
-        return _linear(self.lr, self.lr_final, progress)
-
-    def beta_at(self, progress: float) -> float:
-        """Prioritised replay's importance-weight exponent at ``progress`` ∈ [0, 1]."""
-        return _linear(self.priority_beta, 1.0, progress)
-
     def to_dict(self) -> dict[str, Any]:
         """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""
         return dataclasses.asdict(self)
-
-
-def _linear(start: float, end: float, progress: float) -> float:
-    """``start`` at progress 0, ``end`` from progress 1 on, linear in between: the shape of
-    every schedule over a run's budget."""
-    return start + min(max(progress, 0.0), 1.0) * (end - start)
 
 
 PRESETS: dict[str, dict[str, Any]] = {

@@ -71,8 +71,6 @@ class AgentSpec:
     """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
     head: str = "flat"
     """Q head: flat (one linear output per action) or points (plus a per-action scorer)."""
-    ally_actions: bool = False
-    """Feed the team-mates' one-hot last actions (the goals they are driving to)."""
 
     def inputs(self, obs: torch.Tensor, last_actions: torch.Tensor) -> torch.Tensor:
         """The network's input from featurized observations and last actions (see
@@ -83,7 +81,6 @@ class AgentSpec:
             self.n_actions,
             last_action=self.last_action,
             agent_id=self.agent_id,
-            ally_actions=self.ally_actions,
         )
 
     def build(self) -> RNNAgent:
@@ -101,7 +98,6 @@ def agent_spec(
     agent_id: bool,
     features: str = "raw",
     head: str = "flat",
-    ally_actions: bool = False,
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
@@ -113,11 +109,8 @@ def agent_spec(
         env.n_agents,
         last_action=last_action,
         agent_id=agent_id,
-        ally_actions=ally_actions,
     )
-    return AgentSpec(
-        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, ally_actions
-    )
+    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features, head)
 
 
 def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:
@@ -176,7 +169,6 @@ class QLearner:
         mixer_embed: int,
         hypernet_hidden: int,
         td_lambda: float = 0.0,
-        eval_ema: float = 0.0,
     ) -> None:
         self.env, self.spec, self.mixer_name = env, spec, mixer
         self.td_lambda = td_lambda
@@ -189,11 +181,6 @@ class QLearner:
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
-        self.eval_ema = eval_ema
-        self.average_agent = copy.deepcopy(self.agent) if eval_ema > 0 else None
-        """Exponential moving average of the agent (``eval_ema`` > 0): the evaluated policy."""
-        self.episode_errors = torch.zeros(0)
-        """``[B]`` mean |TD error| of each episode of the last batch: its replay priority."""
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""
@@ -221,17 +208,11 @@ class QLearner:
         if not self.mixer.team_output:  # IQL: a destroyed robot has no TD error of its own
             mask = mask * batch.alive[:, :-1]
         td = (q_tot - targets) * mask  # [B, T, 1 or n]
-        squared = td**2
-        if batch.weights is not None:  # prioritised replay: undo the sampling bias
-            squared = squared * batch.weights[:, None, None]
-        loss = squared.sum() / mask.sum().clamp(min=1.0)
-        with torch.no_grad():
-            self.episode_errors = td.abs().sum((1, 2)) / mask.sum((1, 2)).clamp(min=1.0)
+        loss = (td**2).sum() / mask.sum().clamp(min=1.0)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
         self.optimizer.step()
-        self._update_average()
         self.updates += 1
         if self.updates % self.target_update_interval == 0:
             self.update_targets()
@@ -243,35 +224,19 @@ class QLearner:
             "target": float((targets * mask).sum() / mask.sum().clamp(min=1.0)),
         }
 
-    def set_lr(self, lr: float) -> None:
-        """Set the optimiser's learning rate (the trainer's schedule calls this)."""
-        for group in self.optimizer.param_groups:
-            group["lr"] = lr
-
-    @torch.no_grad()
-    def _update_average(self) -> None:
-        if self.average_agent is None:
-            return
-        for avg, new in zip(self.average_agent.parameters(), self.agent.parameters(), strict=True):
-            avg.lerp_(new, self.eval_ema)
-
     def update_targets(self) -> None:
         """Copy the online networks into the target networks (hard update)."""
         self.target_agent.load_state_dict(self.agent.state_dict())
         self.target_mixer.load_state_dict(self.mixer.state_dict())
 
     def acting_weights(self) -> dict[str, np.ndarray]:
-        """The latest weights, which sampling acts with (NumPy arrays, cheap to ship)."""
-        return _numpy_weights(self.agent)
-
-    def policy_weights(self) -> dict[str, np.ndarray]:
-        """The weights evaluations measure: the average with ``eval_ema``, else the latest."""
-        average = self.average_agent
-        return _numpy_weights(self.agent if average is None else average)
+        """The agent's latest weights, which sampling and evaluation act with (NumPy arrays,
+        cheap to ship)."""
+        return {k: v.detach().cpu().numpy().copy() for k, v in self.agent.state_dict().items()}
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to resume learning exactly (networks, targets, optimiser)."""
-        state = {
+        return {
             "agent": self.agent.state_dict(),
             "mixer": self.mixer.state_dict(),
             "target_agent": self.target_agent.state_dict(),
@@ -279,9 +244,6 @@ class QLearner:
             "optimizer": self.optimizer.state_dict(),
             "updates": self.updates,
         }
-        if self.average_agent is not None:
-            state["average_agent"] = self.average_agent.state_dict()
-        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved."""
@@ -291,10 +253,3 @@ class QLearner:
         self.target_mixer.load_state_dict(state["target_mixer"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
-        if self.average_agent is not None:  # a run that turns eval_ema on starts it afresh
-            self.average_agent.load_state_dict(state.get("average_agent", state["agent"]))
-
-
-def _numpy_weights(agent: nn.Module) -> dict[str, np.ndarray]:
-    """An agent's weights as NumPy arrays: what workers need, cheap to ship by Ray."""
-    return {k: v.detach().cpu().numpy().copy() for k, v in agent.state_dict().items()}

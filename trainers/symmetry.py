@@ -9,9 +9,9 @@ valid episode after any of them:
 * ``field`` turns the whole scene half a turn about the field's centre. The layout is
   centrally symmetric (``docs/reference.md``, "Arena"; the obstacles to within 2 cm, the spawn
   ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
-  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative`` and
-  ``exposure`` features are built from differences of positions and of angles, so they do
-  not change at all; neither do ``sight``'s, tested against a map made exactly symmetric.
+  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative``
+  features are built from differences of positions and of angles, so they do not change at
+  all.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.
@@ -22,7 +22,7 @@ the way image models see flipped images: the Q-values of a relabelled scene must
 relabelled Q-values, and the learner no longer has to discover that from data.
 
 The transforms assume the layouts the trainers build on: the full 37-value abstract 2 v 2
-observation (``docs/options.md``), its ``relative``, ``exposure`` and ``sight`` extensions
+observation (``docs/options.md``), its ``relative`` extension
 (:mod:`neuronsmae.trainers.features`), the 21-value global state (per robot x, y, yaw, HP,
 bullets, blue first, then the time) and 8 actions. :func:`task_group` refuses any other.
 """
@@ -37,15 +37,7 @@ import numpy as np
 import torch
 
 from neuronsmae.trainers.buffer import Batch
-from neuronsmae.trainers.features import (
-    EXPOSURE_DIM,
-    EXPOSURE_PER_POINT,
-    LAYOUT_37,
-    RELATIVE_DIM,
-    RELATIVE_PER_ENEMY,
-    SIGHT_PER_ENEMY,
-    feature_dim,
-)
+from neuronsmae.trainers.features import LAYOUT_37, RELATIVE_PER_ENEMY, feature_dim
 
 N_AGENTS, N_ENEMY, K = 2, 2, 4
 N_ACTIONS = N_ENEMY * K
@@ -126,11 +118,6 @@ def _enemies(obs_dim: int) -> Symmetry:
     pairs = [(6, 9, 3), (12, 20, 2 * K), (31, 32, 1), (35, 36, 1)]
     if obs_dim > LAYOUT_37:
         pairs.append((LAYOUT_37, LAYOUT_37 + RELATIVE_PER_ENEMY, RELATIVE_PER_ENEMY))
-    if obs_dim > RELATIVE_DIM:
-        block = EXPOSURE_PER_POINT * K
-        pairs.append((RELATIVE_DIM, RELATIVE_DIM + block, block))
-    if obs_dim > EXPOSURE_DIM:
-        pairs.append((EXPOSURE_DIM, EXPOSURE_DIM + SIGHT_PER_ENEMY, SIGHT_PER_ENEMY))
     state = _swap(STATE_DIM, [(5 * N_AGENTS, 5 * (N_AGENTS + 1), 5)])
     return Symmetry(
         "enemies",

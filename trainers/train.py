@@ -37,7 +37,6 @@ from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
     Counters,
     load_checkpoint,
-    policy_key,
     policy_weights,
     restore_rng,
     save_checkpoint,
@@ -132,7 +131,6 @@ class Trainer:
             cfg.agent_id_input,
             cfg.features,
             cfg.head,
-            cfg.ally_action_input,
         )
         self.learner = QLearner(
             self.env,
@@ -146,7 +144,6 @@ class Trainer:
             mixer_embed=cfg.mixer_embed,
             hypernet_hidden=cfg.hypernet_hidden,
             td_lambda=cfg.td_lambda,
-            eval_ema=cfg.eval_ema,
         )
         self.group = task_group(
             parse_generators(cfg.augment),
@@ -220,15 +217,6 @@ class Trainer:
         elapsed = time.perf_counter() - self.session_start
         return self.counters.episodes < self.cfg.episodes and (limit <= 0 or elapsed < limit)
 
-    def _progress(self) -> float:
-        """Fraction of the budget spent: episodes of ``cfg.episodes`` or this session's
-        minutes of ``cfg.max_minutes``, whichever is further along."""
-        done = self.counters.episodes / self.cfg.episodes
-        limit = self.cfg.max_minutes * 60.0
-        if limit > 0:
-            done = max(done, (time.perf_counter() - self.session_start) / limit)
-        return min(done, 1.0)
-
     def _run_async(self) -> None:
         issued = self.counters.episodes
         while self._more():
@@ -265,15 +253,9 @@ class Trainer:
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
         if rounds and len(self.buffer) >= cfg.learning_starts:
-            progress = self._progress()
-            self.learner.set_lr(cfg.lr_at(progress))
-            alpha, beta = cfg.priority_alpha, cfg.beta_at(progress)
             for _ in range(rounds * cfg.updates_per_round):
-                batch = self.buffer.sample(cfg.batch_size, self.np_rng, alpha, beta)
+                batch = self.buffer.sample(cfg.batch_size, self.np_rng)
                 self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
-                if alpha > 0 and batch.index is not None:
-                    errors = self.learner.episode_errors.numpy()
-                    self.buffer.update_priorities(batch.index.numpy(), errors)
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
         self.recorder.advance(c.episodes - before)
@@ -323,8 +305,8 @@ class Trainer:
         weights: str = "latest",
         policy: Policy | None = None,
     ) -> dict[str, Any]:
-        """Greedy win rate of ``policy`` (default: the learner's evaluated weights, see
-        ``eval_ema``) on held-out seeds; recorded and returned.
+        """Greedy win rate of ``policy`` (default: the learner's latest weights) on held-out
+        seeds; recorded and returned.
 
         ``split`` picks the seeds (``validation`` or ``test``, see the module docstring);
         with ``keep_best``, a validation result better than every earlier one keeps the
@@ -334,7 +316,7 @@ class Trainer:
         cfg, c = self.cfg, self.counters
         n = episodes or cfg.eval_episodes
         first = cfg.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
-        evaluated = policy or Policy(self.spec, self.learner.policy_weights())
+        evaluated = policy or self._policy()
         self.sampler.broadcast(evaluated)
         requests = [Request(first + k, 0.0, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
@@ -356,7 +338,7 @@ class Trainer:
         (the learner's other state is the current one: resume from checkpoint.pt)."""
         assert self.best is not None
         state = self.learner.state_dict()
-        state[policy_key(state)] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
+        state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
         save_checkpoint(
             self.run_dir / BEST_NAME,
             config=self.cfg.to_dict(),
