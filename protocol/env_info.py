@@ -35,6 +35,9 @@ V_MAX = 2.0
 W_MAX = 1.75
 """Bound of a continuous action's ``omega`` (rad/s): it lies in [−W_MAX, W_MAX] (paper:
 1.75)."""
+FIELD_HALF = (4.04, 2.24)
+"""Half the field's interior along x and y (m): an observation's position is its offset from
+the centre divided by these, ``x → (x − 4.04) / 4.04`` (``docs/reference.md``)."""
 MOTION_HIGH = (V_MAX, V_MAX, W_MAX)
 """Upper bounds of a continuous action's ``(vx, vy, omega)``; the lower ones are their
 negatives."""

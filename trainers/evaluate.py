@@ -19,7 +19,6 @@ from neuronsmae.trainers.agent import masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
 from neuronsmae.trainers.config import LEVELS
-from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 
@@ -54,7 +53,7 @@ class GreedyPolicy:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         policy = load_policy(path)
         self.spec = policy.spec
-        self.featurize = get_features(policy.spec.features)
+        self.featurize = policy.spec.featurizer()
         self.agent = policy.spec.build().eval()
         self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
         self.hidden: torch.Tensor | None = None

@@ -1,118 +1,45 @@
-"""Optional input features computed from an agent's own observation (and the fixed map).
+"""Optional input features computed from an agent's own observation.
 
 ``raw`` feeds the observation as the environment gives it (the paper's setup). ``relative``
-appends geometry that the released 37-value abstract 2 v 2 layout implies but a small
-network needs thousands of episodes to discover from normalised absolute coordinates:
-distances from the agent and its ally to each enemy and each candidate point, the bearing of
-each enemy relative to the agent's heading (is it inside the ±0.52 rad firing cone?), and
-for each candidate point the direction it lies in as seen from its enemy, relative to that
-enemy's heading (which armour plate faces it: rear plates take 3× damage). Everything is a
-fixed function of the observation, so the policy stays decentralised and observation-based;
-it only spares the learner from re-deriving trigonometry, which is what lets it learn within
-a laptop's half hour (see ``bench/bench_learning.py``).
+appends geometry that the observation implies but a small network needs thousands of
+episodes to discover from normalised absolute coordinates: distances from the agent and
+each team-mate to each enemy and each candidate point, the bearing of each enemy relative
+to the agent's heading (is it inside the ±0.52 rad firing cone?), where the agent stands as
+seen from each enemy's heading, and for each candidate point the direction it lies in as
+seen from its enemy, relative to that enemy's heading (which armour plate faces it: rear
+plates take 3× damage). Everything is a fixed function of the observation, so the policy
+stays decentralised and observation-based; it only spares the learner from re-deriving
+trigonometry, which is what lets it learn within a laptop's half hour (measured:
+``python bench/bench_learning.py --minutes 10 --set features=raw --set head=flat`` against
+the defaults).
 
-Layout read (``docs/options.md``; every value in [-1, 1]): poses (x, y, yaw) of self, ally,
-enemy 0, enemy 1 at [0:12]; 4 candidate points (x, y) per enemy at [12:28]; time [28]; HP
-[29:33]; bullets [33:37].
+Columns are read from the observation's layout (:class:`~neuronsmae.protocol.EnvInfo`), so
+``relative`` fits any team sizes and ``k`` as long as the observation holds the poses and
+the candidate points; it refuses other layouts.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-HALF_X, HALF_Y = 4.04, 2.24
-"""Half the field's interior size (m): the observation's position scale."""
+from neuronsmae.protocol.env_info import FIELD_HALF, EnvInfo
+
 SCALE = 8.0
 """Distances are divided by this (m), about the field's diagonal."""
-LAYOUT_37 = 37
-"""Length of the released abstract 2 v 2 observation, the layout ``relative`` understands."""
-N_ENEMY, K = 2, 4
+FEATURES = ("raw", "relative")
+"""Feature sets by name."""
+POINT_FEATURES = ("relative",)
+"""Feature sets that describe each abstract action, as the ``points`` head needs."""
+
+Featurizer = Callable[[np.ndarray], np.ndarray]
+"""``obs [..., obs_shape]`` → ``[..., width]`` float32."""
 
 
 class UnknownFeaturesError(ValueError):
     """An unknown feature set, or one that does not fit the observation's layout."""
-
-
-def _xy(obs: np.ndarray, i: int) -> np.ndarray:
-    """Metres from the normalised (x, y) at columns ``i, i+1``: ``[..., 2]``."""
-    return np.stack([obs[..., i] * HALF_X + HALF_X, obs[..., i + 1] * HALF_Y + HALF_Y], -1)
-
-
-def _angle_feats(angle: np.ndarray) -> list[np.ndarray]:
-    return [np.cos(angle), np.sin(angle)]
-
-
-def relative(obs: np.ndarray) -> np.ndarray:
-    """``obs [..., 37]`` → ``[..., 37 + 44]``: the observation, then the geometry above."""
-    if obs.shape[-1] != LAYOUT_37:
-        raise UnknownFeaturesError(
-            f"'relative' features need the 37-value abstract 2 v 2 observation, got "
-            f"{obs.shape[-1]} values; use features='raw'"
-        )
-    me, ally = _xy(obs, 0), _xy(obs, 3)
-    my_yaw = obs[..., 2] * np.pi
-    out = [obs]
-    for j in range(N_ENEMY):
-        enemy, enemy_yaw = _xy(obs, 6 + 3 * j), obs[..., 8 + 3 * j] * np.pi
-        to_enemy = enemy - me
-        out += [
-            np.linalg.norm(to_enemy, axis=-1) / SCALE,
-            np.linalg.norm(enemy - ally, axis=-1) / SCALE,
-        ]
-        out += _angle_feats(np.arctan2(to_enemy[..., 1], to_enemy[..., 0]) - my_yaw)
-        from_enemy = me - enemy  # where I stand as seen from the enemy's heading
-        out += _angle_feats(np.arctan2(from_enemy[..., 1], from_enemy[..., 0]) - enemy_yaw)
-        for k in range(K):
-            point = _xy(obs, 12 + 2 * (K * j + k))
-            out += [
-                np.linalg.norm(point - me, axis=-1) / SCALE,
-                np.linalg.norm(point - ally, axis=-1) / SCALE,
-            ]
-            side = point - enemy
-            out += [np.cos(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)]
-            out += [np.sin(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)]
-    cols = [c if c.ndim == obs.ndim else c[..., None] for c in out]
-    return np.concatenate(cols, axis=-1).astype(np.float32)
-
-
-RELATIVE_PER_ENEMY = 6 + 4 * K
-"""``relative`` columns per enemy: its 6, then 4 for each of its candidate points."""
-RELATIVE_DIM = LAYOUT_37 + N_ENEMY * RELATIVE_PER_ENEMY
-"""Width of the ``relative`` features (81)."""
-
-
-def action_feature_index(features: str, n_actions: int) -> np.ndarray:
-    """Columns of the features that describe each abstract action: ``[8, 17]``.
-
-    Action ``a`` drives to point ``a % 4`` of enemy ``a // 4``; its row lists that point's
-    (x, y), the enemy's pose, HP and bullets, the enemy's 6 relative features and the
-    point's 4. The ``points`` Q head scores every action from its row.
-    """
-    if features not in POINT_FEATURES or n_actions != N_ENEMY * K:
-        raise UnknownFeaturesError(
-            f"the 'points' head needs features in {POINT_FEATURES} and {N_ENEMY * K} abstract "
-            f"actions, got features={features!r}, n_actions={n_actions}"
-        )
-    rows = []
-    for a in range(n_actions):
-        j, k = divmod(a, K)
-        base = LAYOUT_37 + RELATIVE_PER_ENEMY * j
-        rows.append(
-            [
-                12 + 2 * (K * j + k),
-                13 + 2 * (K * j + k),
-                6 + 3 * j,
-                7 + 3 * j,
-                8 + 3 * j,
-                31 + j,
-                35 + j,
-                *range(base, base + 6),
-                *range(base + 6 + 4 * k, base + 10 + 4 * k),
-            ]
-        )
-    return np.asarray(rows, np.int64)
 
 
 def raw(obs: np.ndarray) -> np.ndarray:
@@ -120,25 +47,133 @@ def raw(obs: np.ndarray) -> np.ndarray:
     return np.asarray(obs, np.float32)
 
 
-FEATURES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "raw": raw,
-    "relative": relative,
-}
-"""Feature sets by name."""
-POINT_FEATURES = ("relative",)
-"""Feature sets that describe each abstract action, as the ``points`` head needs."""
+def _angle(angle: np.ndarray) -> list[np.ndarray]:
+    return [np.cos(angle), np.sin(angle)]
 
 
-def get_features(name: str) -> Callable[[np.ndarray], np.ndarray]:
-    """The feature function called ``name``; raise listing the valid names."""
-    try:
-        return FEATURES[name]
-    except KeyError:
+@dataclass(frozen=True)
+class Relative:
+    """The ``relative`` features of one observation layout; call it on observations.
+
+    Output columns: the observation, then per enemy ``j`` a block of ``per_enemy`` columns
+    (:meth:`enemy_block`): its distance from me and from each team-mate, its bearing from my
+    heading (cos, sin), my bearing from its heading (cos, sin), then per candidate point
+    ``q`` its distance from me and from each team-mate and its bearing from the enemy's
+    heading (cos, sin) (:meth:`point_columns`).
+    """
+
+    info: EnvInfo
+    """The environment whose observations this describes."""
+
+    def __post_init__(self) -> None:
+        layout = self.info.obs
+        if not layout.vector or layout.k == 0:
+            raise UnknownFeaturesError(
+                "'relative' features need the poses and candidate points in the observation "
+                f"(vector_obs and candidate_obs), got {layout}; use features='raw'"
+            )
+
+    @property
+    def per_point(self) -> int:
+        """Columns per candidate point."""
+        return 2 + self.info.obs.team_size
+
+    @property
+    def per_enemy(self) -> int:
+        """Columns per enemy, its points included."""
+        return 4 + self.info.obs.team_size + self.info.obs.k * self.per_point
+
+    @property
+    def width(self) -> int:
+        """Columns of the output."""
+        return self.info.obs_shape + self.info.n_enemies * self.per_enemy
+
+    def enemy_block(self, j: int) -> slice:
+        """Output columns describing enemy ``j`` and its points."""
+        start = self.info.obs_shape + self.per_enemy * j
+        return slice(start, start + self.per_enemy)
+
+    def enemy_columns(self, j: int) -> range:
+        """Output columns describing enemy ``j`` itself (not its points)."""
+        start = self.enemy_block(j).start
+        return range(start, start + 4 + self.info.obs.team_size)
+
+    def point_columns(self, j: int, q: int) -> range:
+        """Output columns describing candidate point ``q`` of enemy ``j``."""
+        start = self.enemy_columns(j).stop + self.per_point * q
+        return range(start, start + self.per_point)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """``obs [..., obs_shape]`` → ``[..., width]``."""
+        layout = self.info.obs
+        if obs.shape[-1] != layout.size:
+            raise UnknownFeaturesError(
+                f"'relative' features expect {layout.size} values, got {obs.shape[-1]}"
+            )
+        team = [_xy(obs, layout.pose(r)[:2]) for r in range(layout.team_size)]
+        me, my_yaw = team[0], obs[..., layout.pose(0)[2]] * np.pi
+        out = [obs]
+        for j in range(layout.n_enemies):
+            x, y, yaw = layout.pose(layout.enemy(j))
+            enemy, enemy_yaw = _xy(obs, (x, y)), obs[..., yaw] * np.pi
+            out += [np.linalg.norm(enemy - mate, axis=-1) / SCALE for mate in team]
+            to_enemy, from_enemy = enemy - me, me - enemy
+            out += _angle(np.arctan2(to_enemy[..., 1], to_enemy[..., 0]) - my_yaw)
+            out += _angle(np.arctan2(from_enemy[..., 1], from_enemy[..., 0]) - enemy_yaw)
+            for q in range(layout.k):
+                point = _xy(obs, layout.point(j, q))
+                out += [np.linalg.norm(point - mate, axis=-1) / SCALE for mate in team]
+                side = point - enemy
+                out += _angle(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)
+        cols = [c if c.ndim == obs.ndim else c[..., None] for c in out]
+        return np.concatenate(cols, axis=-1).astype(np.float32)
+
+
+def _xy(obs: np.ndarray, cols: tuple[int, ...]) -> np.ndarray:
+    """Metres from the normalised ``(x, y)`` at columns ``cols``: ``[..., 2]``."""
+    (hx, hy), (i, j) = FIELD_HALF, cols
+    return np.stack([obs[..., i] * hx + hx, obs[..., j] * hy + hy], -1)
+
+
+def get_features(name: str, info: EnvInfo) -> Featurizer:
+    """The feature function ``name`` for observations of ``info``; raise listing the valid
+    names, or if the layout does not suit it."""
+    if name not in FEATURES:
+        raise UnknownFeaturesError(f"unknown features {name!r}; valid: {', '.join(FEATURES)}")
+    return raw if name == "raw" else Relative(info)
+
+
+def feature_dim(name: str, info: EnvInfo) -> int:
+    """Input width after the feature set ``name`` for observations of ``info``."""
+    features = get_features(name, info)
+    return features.width if isinstance(features, Relative) else info.obs_shape
+
+
+def action_feature_index(features: str, info: EnvInfo) -> np.ndarray:
+    """Columns of the features that describe each abstract action: ``[n_actions, F]``.
+
+    Action ``a`` drives to point ``q`` of enemy ``j`` (``info.split(a)``); its row lists that
+    point's (x, y), the enemy's pose, HP and bullets, the enemy's relative columns and the
+    point's. The ``points`` Q head scores every action from its row (17 columns for 2 v 2).
+    """
+    if features not in POINT_FEATURES or info.action_space != "abstract":
         raise UnknownFeaturesError(
-            f"unknown features {name!r}; valid: {', '.join(sorted(FEATURES))}"
-        ) from None
-
-
-def feature_dim(name: str, obs_dim: int) -> int:
-    """Input width after the feature set ``name`` for observations of ``obs_dim`` values."""
-    return int(get_features(name)(np.zeros((1, obs_dim), np.float32)).shape[-1])
+            f"the 'points' head needs features in {POINT_FEATURES} and abstract actions, got "
+            f"features={features!r}, action_space={info.action_space!r}"
+        )
+    relative, layout = Relative(info), info.obs
+    rows = []
+    for a in range(info.n_actions):
+        j, q = info.split(a)
+        enemy = layout.enemy(j)
+        rows.append(
+            [
+                *layout.point(j, q),
+                *layout.pose(enemy),
+                layout.hp_of(enemy),
+                layout.bullets_of(enemy),
+                *relative.enemy_columns(j),
+                *relative.point_columns(j, q),
+            ]
+        )
+    return np.asarray(rows, np.int64)

@@ -16,40 +16,44 @@ import numpy as np
 import torch
 from torch import nn
 
+from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Batch
-from neuronsmae.trainers.features import action_feature_index
+from neuronsmae.trainers.features import (
+    Featurizer,
+    UnknownFeaturesError,
+    action_feature_index,
+    feature_dim,
+    get_features,
+    raw,
+)
 from neuronsmae.trainers.mixers import make_mixer
 
 
 @dataclass(frozen=True)
 class EnvSpec:
-    """The sizes the networks need, from ``ArenaAPI.get_env_info``."""
+    """The sizes the networks and the buffer need."""
 
     n_agents: int
     """Agents controlled by the learner (the blue team)."""
     n_actions: int
     """Discrete choices per agent."""
     obs_dim: int
-    """Length of one agent's observation."""
+    """Length of one agent's observation after the feature set (what the buffer stores)."""
     state_dim: int
     """Length of the global state."""
     episode_limit: int
     """Decisions per episode at most."""
 
     @classmethod
-    def from_env_info(cls, info: dict[str, Any]) -> EnvSpec:
-        """Read the five sizes out of ``get_env_info()`` (shapes may be ints or tuples)."""
-
-        def flat(v: Any) -> int:
-            return int(np.prod(v)) if isinstance(v, list | tuple) else int(v)
-
+    def of(cls, info: EnvInfo, features: str = "raw") -> EnvSpec:
+        """The sizes of ``info``'s task, observations widened by the feature set ``features``."""
         return cls(
-            n_agents=int(info["n_agents"]),
-            n_actions=int(info["n_actions"]),
-            obs_dim=flat(info["obs_shape"]),
-            state_dim=flat(info["state_shape"]),
-            episode_limit=int(info["episode_limit"]),
+            n_agents=info.n_agents,
+            n_actions=info.n_actions,
+            obs_dim=feature_dim(features, info),
+            state_dim=info.state_shape,
+            episode_limit=info.episode_limit,
         )
 
 
@@ -71,6 +75,22 @@ class AgentSpec:
     """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
     head: str = "flat"
     """Q head: flat (one linear output per action) or points (plus a per-action scorer)."""
+    env_info: dict[str, Any] | None = None
+    """The environment's ``get_env_info()``: the layout the features and the points head
+    read (needed unless ``features='raw'`` and ``head='flat'``)."""
+
+    def layout(self) -> EnvInfo:
+        """The environment's layout, parsed from :attr:`env_info`."""
+        if self.env_info is None:
+            raise UnknownFeaturesError(
+                f"features={self.features!r} with head={self.head!r} need the environment's "
+                "layout: build the spec with agent_spec(..., info=EnvInfo)"
+            )
+        return EnvInfo.from_dict(self.env_info)
+
+    def featurizer(self) -> Featurizer:
+        """The feature function applied to each raw observation before :meth:`inputs`."""
+        return raw if self.features == "raw" else get_features(self.features, self.layout())
 
     def inputs(self, obs: torch.Tensor, last_actions: torch.Tensor) -> torch.Tensor:
         """The network's input from featurized observations and last actions (see
@@ -87,7 +107,7 @@ class AgentSpec:
         """A fresh network with this architecture."""
         index = None
         if self.head == "points":
-            index = torch.as_tensor(action_feature_index(self.features, self.n_actions))
+            index = torch.as_tensor(action_feature_index(self.features, self.layout()))
         return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim, index)
 
 
@@ -98,10 +118,12 @@ def agent_spec(
     agent_id: bool,
     features: str = "raw",
     head: str = "flat",
+    info: EnvInfo | None = None,
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
-    ``env.obs_dim`` is the width *after* the feature set (what the buffer stores).
+    ``env.obs_dim`` is the width *after* the feature set (what the buffer stores); ``info``
+    is the environment's layout, which the spec carries for the features and the head.
     """
     width = agent_input_dim(
         env.obs_dim,
@@ -110,7 +132,10 @@ def agent_spec(
         last_action=last_action,
         agent_id=agent_id,
     )
-    return AgentSpec(width, env.n_actions, hidden_dim, last_action, agent_id, features, head)
+    env_info = None if info is None else info.to_dict()
+    return AgentSpec(
+        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, env_info
+    )
 
 
 def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:

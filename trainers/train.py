@@ -24,13 +24,14 @@ import random
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 import ray
 import torch
 
+from neuronsmae.protocol import EnvInfo
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
 from neuronsmae.trainers.checkpoint import (
@@ -43,7 +44,6 @@ from neuronsmae.trainers.checkpoint import (
 )
 from neuronsmae.trainers.config import TrainConfig
 from neuronsmae.trainers.evaluate import summarize
-from neuronsmae.trainers.features import feature_dim
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement
@@ -122,8 +122,8 @@ class Trainer:
             max_failures=cfg.max_worker_failures,
             **sampler_placement(cfg, n_workers, base_seed),
         )
-        raw = EnvSpec.from_env_info(self.sampler.env_info())
-        self.env = replace(raw, obs_dim=feature_dim(cfg.features, raw.obs_dim))
+        info = EnvInfo.from_dict(self.sampler.env_info())
+        self.env = EnvSpec.of(info, cfg.features)
         self.spec = agent_spec(
             self.env,
             cfg.agent_hidden,
@@ -131,6 +131,7 @@ class Trainer:
             cfg.agent_id_input,
             cfg.features,
             cfg.head,
+            info,
         )
         self.learner = QLearner(
             self.env,
@@ -145,14 +146,7 @@ class Trainer:
             hypernet_hidden=cfg.hypernet_hidden,
             td_lambda=cfg.td_lambda,
         )
-        self.group = task_group(
-            parse_generators(cfg.augment),
-            cfg.features,
-            self.env.obs_dim,
-            self.env.state_dim,
-            self.env.n_actions,
-            self.env.n_agents,
-        )
+        self.group = task_group(parse_generators(cfg.augment), cfg.features, info)
         self.buffer = EpisodeReplayBuffer(
             cfg.buffer_size,
             self.env.n_agents,

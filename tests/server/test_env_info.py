@@ -9,6 +9,7 @@ import pytest
 
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.protocol.codec import decode, encode
+from neuronsmae.protocol.env_info import FIELD_HALF
 from neuronsmae.server import Arena
 from neuronsmae.server.task import observations as O
 from neuronsmae.server.task import perception as P
@@ -127,3 +128,7 @@ def test_the_wire_dict_keeps_the_released_keys_and_values() -> None:
         "mode": "cooperative",
     }
     assert {k: info[k] for k in released} == released
+
+
+def test_the_position_scale_is_the_fields() -> None:
+    assert (O.HALF_X, O.HALF_Y) == FIELD_HALF
