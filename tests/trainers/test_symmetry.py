@@ -9,7 +9,7 @@ import torch
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.server.sim.field import FIELD_X, FIELD_Y, OBSTACLES
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
-from neuronsmae.trainers.config import ConfigError, TrainConfig
+from neuronsmae.trainers.config import ConfigError, make_config
 from neuronsmae.trainers.features import feature_dim, get_features
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
@@ -155,7 +155,7 @@ def test_errors_name_the_valid_choices() -> None:
     with pytest.raises(UnknownSymmetryError, match="distinct"):
         parse_generators("field,field")
     with pytest.raises(ConfigError, match="augment"):
-        TrainConfig(augment="enemy")
+        make_config({"augment": "enemy"})
     lidar = EnvInfo.from_dict({**INFO.to_dict(), "lidar_beams": 61, "obs_shape": 98})
     with pytest.raises(UnknownSymmetryError, match="needs poses in the observation and no LiDAR"):
         task_group(("field",), "raw", lidar)

@@ -77,7 +77,7 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     result = play(str(out / "checkpoint.pt"), "easy", 2, 1_000_000_000)
     assert result["episodes"] == 2
     assert result["blue_win_rate"] + result["red_win_rate"] + result["draw_rate"] == 1.0
-    assert second["config"]["agent_hidden"] == 16  # the saved config was kept
+    assert second["config"]["learner"]["agent_hidden"] == 16  # the saved config was kept
     steps = _episodes_column(out / "train.csv")
     assert steps == sorted(steps) and steps[-1] == 12
     assert _episodes_column(out / "eval.csv")[-1] == 12
@@ -118,7 +118,7 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
-    assert trainer.learner.updates == 2 * cfg.updates_per_round
+    assert trainer.learner.updates == 2 * cfg.learner.updates_per_round
     # p = 1: the second iteration replays the first iteration's starts not won (each once,
     # never both at once) and plays fresh seeds only for the rest
     first = {e.info["seed"]: e.info["winner"] == "blue" for e in list(trainer.recent)[:2]}
@@ -126,7 +126,7 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     assert lost  # the untrained agents lose a start of the first iteration: replay is exercised
     second = trainer.stored_seeds[2:]
     assert sorted(s for s in second if s in first) == lost
-    fresh = [train_seed(cfg.seed, k, cfg.eval_seed) for k in range(4)]
+    fresh = [train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(4)]
     assert all(s in first or s in fresh[2:] for s in second)
     assert result["start_replays"] == len(lost) and set(fresh[:2]) == set(first)
     saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)["starts"]
@@ -146,7 +146,8 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
     run = trainer.sampler.run
 
     def recording_run(requests: list[Request]) -> list[Episode]:
-        split = "test" if requests[0].seed >= cfg.eval_seed + TEST_SEED_OFFSET else "validation"
+        test = requests[0].seed >= cfg.eval.eval_seed + TEST_SEED_OFFSET
+        split = "test" if test else "validation"
         played[split].update(r.seed for r in requests)
         sent = ray.get(trainer.sampler.weights_ref).weights
 
@@ -159,8 +160,8 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
 
     trainer.sampler.run = recording_run  # type: ignore[method-assign]
     result = trainer.run()
-    assert played["validation"] == {cfg.eval_seed + k for k in range(3)}
-    assert played["test"] == {cfg.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
+    assert played["validation"] == {cfg.eval.eval_seed + k for k in range(3)}
+    assert played["test"] == {cfg.eval.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
     best, validation = result["best"], [e for e in result["evals"] if e["split"] == "validation"]
     assert best["split"] == "test" and best["weights"] == "best"
     top = max(e["win_rate"] for e in validation)
@@ -230,7 +231,7 @@ def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: P
     assert result["counters"]["episodes"] == n
     # every training seed was stored exactly once: the interrupted one was replayed whole
     assert sorted(trainer.stored_seeds) == sorted(
-        train_seed(cfg.seed, k, cfg.eval_seed) for k in range(n)
+        train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(n)
     )
     buf = trainer.buffer
     for i in range(len(buf)):
