@@ -29,7 +29,7 @@ from typing import Any
 import ray
 
 from bench.common import machine, table, write_json
-from neuronsmae.trainers.features import feature_dim
+from neuronsmae.protocol import EnvInfo
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 from neuronsmae.trainers.sampler import Request, Sampler
@@ -40,9 +40,9 @@ EPSILON = 0.2
 
 def make_policy(info: dict[str, Any]) -> Policy:
     """An untrained agent of the default architecture, as the trainer would broadcast."""
-    raw = EnvSpec.from_env_info(info)
-    env = EnvSpec(**{**raw.__dict__, "obs_dim": feature_dim("relative", raw.obs_dim)})
-    spec = agent_spec(env, 128, True, True, "relative", "points")
+    layout = EnvInfo.from_dict(info)
+    env = EnvSpec.of(layout, "relative")
+    spec = agent_spec(env, 128, True, True, "relative", "points", layout)
     weights = {k: v.detach().numpy().copy() for k, v in spec.build().state_dict().items()}
     return Policy(spec, weights)
 

@@ -216,7 +216,7 @@ def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
     t0 = time.monotonic()
     trainer = Trainer(cfg, hook=hook)
     result = trainer.run()
-    expected = sorted(train_seed(cfg.seed, k, cfg.eval_seed) for k in range(episodes))
+    expected = sorted(train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(episodes))
     buf, partial = trainer.buffer, 0
     for i in range(len(buf)):  # a stored episode is filled up to its length and no further
         n = int(buf.lengths[i])

@@ -32,7 +32,7 @@ from neuronsmae.trainers.config import TrainConfig
 from neuronsmae.trainers.evaluate import GreedyPolicy, MatchPolicy, QPolicy, act_greedily
 from neuronsmae.trainers.train import TEST_SEED_OFFSET
 
-TEST_SEED = TrainConfig().eval_seed + TEST_SEED_OFFSET
+TEST_SEED = TrainConfig().eval.eval_seed + TEST_SEED_OFFSET
 """First seed of the trainer's test split, so the games are those its final figures count."""
 
 

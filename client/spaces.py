@@ -13,7 +13,8 @@ Conventions (both faces):
   over those choices is called ``"action_mask"`` (int8, 1 = allowed), the name every
   Gymnasium/PettingZoo tool passes to ``space.sample(mask=...)``.
 * Continuous actions are ``Box(4)`` per agent: ``(vx, vy, omega, target)`` with
-  ``vx, vy ∈ [-2, 2]`` m/s, ``omega ∈ [-1.75, 1.75]`` rad/s and ``target ∈ [0, n_enemies]``
+  ``vx, vy ∈ [-2, 2]`` m/s, ``omega ∈ [-1.75, 1.75]`` rad/s (``V_MAX`` and ``W_MAX`` of
+  :mod:`neuronsmae.protocol.env_info`) and ``target ∈ [0, n_enemies]``
   read as a bin: enemy ``i`` is any value in ``[i, i + 1)`` (the upper edge ``n_enemies``
   counts as the last enemy). Equal-width bins let an unsquashed Gaussian or a tanh-scaled
   policy pick every enemy equally easily; an exact integer ``i`` still means enemy ``i``.
@@ -32,13 +33,15 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from neuronsmae.protocol import env_info
+from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
 
 PHYSICS_HZ = 50
 """Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
-MOTION_LOW = np.array([-2.0, -2.0, -1.75], dtype=np.float32)
-MOTION_HIGH = np.array([2.0, 2.0, 1.75], dtype=np.float32)
+MOTION_HIGH = np.array(env_info.MOTION_HIGH, dtype=np.float32)
+MOTION_LOW = -MOTION_HIGH
 """Bounds of (vx, vy, omega) of a continuous action, as the arena validates them."""
 ACTION_MASK = "action_mask"
 TARGET_MASK = "target_mask"
@@ -97,36 +100,58 @@ def open_face(
 class Layout:
     """The shape of an arena's task, read once from ``get_env_info`` (fixed by its options)."""
 
-    agents: tuple[str, ...]
-    """Controlled robots in the arena's order (blue first), e.g. ``("blue_0", "blue_1")``."""
-    kind: str
-    """The arena's action space option: "abstract", "discrete" or "continuous"."""
-    n_actions: int
-    """Flat discrete choices per agent (for continuous: target enemies)."""
-    n_enemies: int
-    obs_dim: int
-    state_dim: int
-    episode_limit: int
-    """Decisions per episode at most."""
-    decision_steps: int
-    mode: str
+    info: EnvInfo
+    """The arena's ``get_env_info()``, parsed."""
 
     @classmethod
     def of(cls, arena: ArenaAPI) -> Layout:
-        info = arena.get_env_info()
-        layout = cls(
-            agents=tuple(info["agents"]), kind=info["action_space"],
-            n_actions=int(info["n_actions"]), n_enemies=int(info["n_enemies"]),
-            obs_dim=int(info["obs_shape"]), state_dim=int(info["state_shape"]),
-            episode_limit=int(info["episode_limit"]),
-            decision_steps=int(info["decision_steps"]), mode=info["mode"],
-        )  # fmt: skip
+        layout = cls(EnvInfo.from_dict(arena.get_env_info()))
         if not layout.agents:
             raise InvalidOptionError(
                 f"mode={layout.mode!r} leaves no robot to control; use 'cooperative' or "
                 "'competitive'"
             )
         return layout
+
+    @property
+    def agents(self) -> tuple[str, ...]:
+        """Controlled robots in the arena's order (blue first), e.g. ``("blue_0", "blue_1")``."""
+        return self.info.agents
+
+    @property
+    def kind(self) -> str:
+        """The arena's action space option: "abstract", "discrete" or "continuous"."""
+        return self.info.action_space
+
+    @property
+    def n_actions(self) -> int:
+        """Flat discrete choices per agent (for continuous: target enemies)."""
+        return self.info.n_actions
+
+    @property
+    def n_enemies(self) -> int:
+        return self.info.n_enemies
+
+    @property
+    def obs_dim(self) -> int:
+        return self.info.obs_shape
+
+    @property
+    def state_dim(self) -> int:
+        return self.info.state_shape
+
+    @property
+    def episode_limit(self) -> int:
+        """Decisions per episode at most."""
+        return self.info.episode_limit
+
+    @property
+    def decision_steps(self) -> int:
+        return self.info.decision_steps
+
+    @property
+    def mode(self) -> str:
+        return self.info.mode
 
     @property
     def continuous(self) -> bool:

@@ -5,8 +5,10 @@ This package is the only code the server and the client have in common.
 
 from __future__ import annotations
 
+from neuronsmae.protocol.env_info import V_MAX, W_MAX, EnvInfo, ObsLayout, StateLayout
 from neuronsmae.protocol.errors import (
     BusyError,
+    EnvInfoError,
     ForkedZenohError,
     InvalidActionError,
     InvalidContextError,
@@ -22,8 +24,12 @@ from neuronsmae.protocol.errors import (
 from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
 
 __all__ = [
+    "V_MAX",
+    "W_MAX",
     "ArenaAPI",
     "BusyError",
+    "EnvInfo",
+    "EnvInfoError",
     "ForkedZenohError",
     "InvalidActionError",
     "InvalidContextError",
@@ -31,9 +37,11 @@ __all__ = [
     "MalformedMessageError",
     "MessageTooLargeError",
     "NeuronsMAEError",
+    "ObsLayout",
     "ResetNeededError",
     "ServerError",
     "ServerUnavailableError",
+    "StateLayout",
     "VecArenaAPI",
     "VersionMismatchError",
 ]

@@ -100,7 +100,7 @@ def error_from_code(code: str, message: str) -> NeuronsMAEError:
     return ERRORS.get(code, ServerError)(message)
 
 
-# --- recordings (local files, never sent over the wire, so not in ERRORS) -------------------
+# --- local errors (never sent over the wire, so not in ERRORS) ----------------------------
 
 
 class RecordingFormatError(NeuronsMAEError, ValueError):
@@ -127,6 +127,13 @@ class ForkedZenohError(NeuronsMAEError, RuntimeError):
     the child instead (the ``spawn`` context)."""
 
     code = "forked_zenoh"
+
+
+class EnvInfoError(NeuronsMAEError, ValueError):
+    """An env info dict (``get_env_info()``) lacks a key, has a value of the wrong type, or
+    gives sizes that do not fit its own layout."""
+
+    code = "bad_env_info"
 
 
 class MissingDependencyError(NeuronsMAEError, ImportError):

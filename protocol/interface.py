@@ -82,7 +82,10 @@ class ArenaAPI(abc.ABC):
     def get_env_info(self) -> dict[str, Any]:
         """Shapes and sizes: ``n_actions``, ``n_agents``, ``state_shape``, ``obs_shape``,
         ``episode_limit`` (decisions per episode), plus ``action_space``, ``agents``,
-        ``n_enemies`` and ``decision_steps``."""
+        ``n_enemies``, ``decision_steps``, ``mode`` and what fixes the observation's layout
+        (``team_size``, ``k``, ``candidate_obs``, ``vector_obs``, ``lidar_beams``).
+        :meth:`EnvInfo.from_dict <neuronsmae.protocol.env_info.EnvInfo.from_dict>` parses
+        it into a typed object that names every column."""
 
     @abc.abstractmethod
     def render(self) -> np.ndarray:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 from neuronsmae.server.config import ArenaConfig
@@ -216,23 +217,33 @@ class Arena(ArenaAPI):
         ]
 
     def get_env_info(self) -> dict[str, Any]:
+        return self.env_info().to_dict()
+
+    def env_info(self) -> EnvInfo:
+        """:meth:`get_env_info` as the typed :class:`~neuronsmae.protocol.EnvInfo` (which
+        checks that the layout it computes is the one this arena's observations have)."""
         cfg = self.config
         # Agents are blue robots, or (competitive, equal teams) any robot: one layout fits all.
         n_team, n_enemy = self.n_blue, self.n_red
-        return {
-            "n_actions": n_actions(cfg.action_space, n_enemy, cfg.k),
-            "n_agents": len(self.agents),
-            "state_shape": O.state_size(self.n),
-            "obs_shape": O.obs_size(
+        return EnvInfo(
+            n_agents=len(self.agents),
+            n_enemies=n_enemy,
+            n_actions=n_actions(cfg.action_space, n_enemy, cfg.k),
+            obs_shape=O.obs_size(
                 n_team, n_enemy, cfg.k, cfg.with_candidates, cfg.vector_obs, cfg.lidar
             ),
-            "episode_limit": -(-cfg.episode_steps // cfg.period),
-            "action_space": cfg.action_space,
-            "agents": [self.agent_name(i) for i in self.agents],
-            "n_enemies": n_enemy,
-            "decision_steps": cfg.period,
-            "mode": cfg.mode,
-        }
+            state_shape=O.state_size(self.n),
+            episode_limit=-(-cfg.episode_steps // cfg.period),
+            action_space=cfg.action_space,
+            agents=tuple(self.agent_name(i) for i in self.agents),
+            decision_steps=cfg.period,
+            mode=cfg.mode,
+            team_size=n_team,
+            k=cfg.k,
+            candidate_obs=cfg.with_candidates,
+            vector_obs=cfg.vector_obs,
+            lidar_beams=F.LIDAR_BEAMS if cfg.lidar else 0,
+        )
 
     def render(self) -> np.ndarray:
         self._need_episode("render()")

@@ -4,7 +4,9 @@ One Q-learning core (:mod:`.learner`) with a mixer chosen by name (:mod:`.mixers
 agents with shared parameters (:mod:`.agent`), whole-episode replay (:mod:`.buffer`), rollout
 workers that become Ray actors at the launch point (:mod:`.rollout`, :mod:`.sampler`), the
 training loop (:mod:`.train`), checkpoints (:mod:`.checkpoint`), records (:mod:`.records`),
-greedy evaluation (:mod:`.evaluate`) and the ``neuronsmae-train`` command (:mod:`.cli`).
+greedy evaluation (:mod:`.evaluate`) and the ``neuronsmae-train`` command (:mod:`.cli`),
+configured by :class:`TrainConfig` and its groups (:mod:`.config`). Experiments that stay
+off by default live in :mod:`.experimental`.
 
 Heavy modules (Ray, TensorBoard) are not imported here, so ``evaluate_checkpoint`` can be
 used by the match command without starting anything.

@@ -24,15 +24,9 @@ def agent_input_dim(
     *,
     last_action: bool,
     agent_id: bool,
-    ally_actions: bool = False,
 ) -> int:
     """Width of the agent network's input: observation, then the optional one-hots."""
-    return (
-        obs_dim
-        + (n_actions if last_action else 0)
-        + ((n_agents - 1) * n_actions if ally_actions else 0)
-        + (n_agents if agent_id else 0)
-    )
+    return obs_dim + (n_actions if last_action else 0) + (n_agents if agent_id else 0)
 
 
 def build_inputs(
@@ -42,16 +36,14 @@ def build_inputs(
     *,
     last_action: bool,
     agent_id: bool,
-    ally_actions: bool = False,
 ) -> torch.Tensor:
     """Concatenate the agent network's inputs.
 
     ``obs [..., n_agents, obs_dim]`` (float) and ``last_actions [..., n_agents]`` (int64, the
     action taken at the previous decision, ``-1`` before the first) → ``[..., n_agents, D]``
     with D from :func:`agent_input_dim`. A ``-1`` last action becomes an all-zero one-hot.
-    The columns are: observation, own last action, the team-mates' last actions (each
-    agent's mates in index order), agent id; the observation comes first so that feature
-    column indices (the points head's) are input column indices.
+    The columns are: observation, own last action, agent id; the observation comes first so
+    that feature column indices (the points head's) are input column indices.
     """
     parts = [obs]
     n_agents = obs.shape[-2]
@@ -59,9 +51,6 @@ def build_inputs(
     onehot = onehot * (last_actions >= 0).unsqueeze(-1).to(obs.dtype)  # [..., n, A]
     if last_action:
         parts.append(onehot)
-    if ally_actions:
-        mates = torch.tensor([[j for j in range(n_agents) if j != i] for i in range(n_agents)])
-        parts.append(onehot[..., mates, :].flatten(-2))  # [..., n, (n-1)·A]
     if agent_id:
         ids = torch.eye(n_agents, dtype=obs.dtype, device=obs.device)
         parts.append(ids.expand(*obs.shape[:-1], n_agents))

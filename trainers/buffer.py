@@ -11,13 +11,8 @@ decision), so each is padded to ``episode_limit`` and carries masks:
   drops it from IQL's per-agent loss.
 
 An :class:`Episode` is validated before it is stored, so a partial episode from a worker
-whose env died mid-run can never enter the buffer.
-
-Sampling is uniform by default. With ``alpha > 0`` it is prioritised per episode (Schaul et
-al., 2016, at the unit recurrent learners replay): an episode is drawn with probability
-∝ ``priority ** alpha``, where its priority is the mean |TD error| of its last replay (new
-episodes get the largest priority seen, so each is replayed soon), and the batch carries
-importance weights ``(size · P) ** -beta / max`` that undo the bias in the loss.
+whose env died mid-run can never enter the buffer. Batches are drawn uniformly (the paper's
+and PyMARL's buffer).
 """
 
 from __future__ import annotations
@@ -27,9 +22,6 @@ from typing import Any
 
 import numpy as np
 import torch
-
-PRIORITY_FLOOR = 1e-3
-"""Added to every priority: an episode the learner fits perfectly is still drawn now and then."""
 
 
 class IncompleteEpisodeError(ValueError):
@@ -119,10 +111,6 @@ class Batch:
     """``[B, T]`` float32."""
     filled: torch.Tensor
     """``[B, T]`` float32."""
-    index: torch.Tensor | None = None
-    """``[B]`` int64 buffer slots the episodes came from (to update their priorities)."""
-    weights: torch.Tensor | None = None
-    """``[B]`` float32 importance weights of prioritised sampling (``None``: uniform)."""
 
 
 class EpisodeReplayBuffer:
@@ -151,9 +139,6 @@ class EpisodeReplayBuffer:
         self.terminated = np.zeros((capacity, steps), np.float32)
         self.filled = np.zeros((capacity, steps), np.float32)
         self.lengths = np.zeros(capacity, np.int64)
-        self.priorities = np.zeros(capacity, np.float64)
-        self.max_priority = 1.0
-        """Priority given to new episodes: the largest seen, so each is replayed soon."""
         self.next_slot = 0
         self.size = 0
         self.added = 0
@@ -185,28 +170,15 @@ class EpisodeReplayBuffer:
         self.filled[i, :steps] = 1.0
         self.terminated[i, steps - 1] = 1.0
         self.lengths[i] = steps
-        self.priorities[i] = self.max_priority
         self.next_slot = (i + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
         self.added += 1
 
-    def sample(
-        self, batch_size: int, rng: np.random.Generator, alpha: float = 0.0, beta: float = 0.0
-    ) -> Batch:
-        """Draw ``batch_size`` stored episodes: uniformly (with replacement if too few) when
-        ``alpha`` is 0, else in proportion to ``priority ** alpha``, with replacement and
-        importance weights of exponent ``beta``."""
+    def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
+        """Draw ``batch_size`` stored episodes uniformly (with replacement if too few)."""
         if self.size == 0:
             raise ValueError("cannot sample from an empty buffer")
-        weights = None
-        if alpha > 0.0:
-            p = self.priorities[: self.size] ** alpha
-            p /= p.sum()
-            idx = rng.choice(self.size, size=batch_size, p=p)
-            w = (self.size * p[idx]) ** -beta
-            weights = torch.from_numpy((w / w.max()).astype(np.float32))
-        else:
-            idx = rng.choice(self.size, size=batch_size, replace=self.size < batch_size)
+        idx = rng.choice(self.size, size=batch_size, replace=self.size < batch_size)
         steps = int(self.lengths[idx].max())
         actions = torch.from_numpy(self.actions[idx, :steps])
         first = torch.full_like(actions[:, :1], -1)
@@ -220,13 +192,4 @@ class EpisodeReplayBuffer:
             rewards=torch.from_numpy(self.rewards[idx, :steps]),
             terminated=torch.from_numpy(self.terminated[idx, :steps]),
             filled=torch.from_numpy(self.filled[idx, :steps]),
-            index=torch.from_numpy(idx),
-            weights=weights,
         )
-
-    def update_priorities(self, index: np.ndarray, errors: np.ndarray) -> None:
-        """Set the priorities of slots ``index [B]`` to their episodes' mean |TD error|
-        ``errors [B]`` (plus a small floor, so no episode becomes unreachable)."""
-        prio = np.abs(np.asarray(errors, np.float64)) + PRIORITY_FLOOR
-        self.priorities[np.asarray(index)] = prio
-        self.max_priority = max(self.max_priority, float(prio.max()))

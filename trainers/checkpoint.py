@@ -22,8 +22,9 @@ from neuronsmae.trainers.learner import AgentSpec, EnvSpec
 
 CHECKPOINT_NAME = "checkpoint.pt"
 """File name of a run's latest checkpoint inside its run directory."""
-FORMAT = 1
-"""Bumped when the layout changes incompatibly."""
+FORMAT = 2
+"""Bumped when the layout changes incompatibly (2: the nested training config, and agent
+specs that carry the environment's layout)."""
 
 
 @dataclass
@@ -42,15 +43,9 @@ class Counters:
     """Rollout-worker restarts over all sessions."""
 
 
-def policy_key(learner_state: dict[str, Any]) -> str:
-    """Which entry of a saved learner state is the policy a match or evaluation plays: the
-    weight average when the run kept one (``eval_ema``), else the latest agent."""
-    return "average_agent" if "average_agent" in learner_state else "agent"
-
-
 def policy_weights(learner_state: dict[str, Any]) -> dict[str, np.ndarray]:
-    """The :func:`policy_key` weights of a saved learner state, as NumPy arrays."""
-    return {k: v.numpy() for k, v in learner_state[policy_key(learner_state)].items()}
+    """The agent's weights in a saved learner state, as NumPy arrays."""
+    return {k: v.numpy() for k, v in learner_state["agent"].items()}
 
 
 def checkpoint_path(path: str | os.PathLike[str]) -> Path:
@@ -73,8 +68,7 @@ def save_checkpoint(
 ) -> None:
     """Write the checkpoint atomically (temporary file, then rename).
 
-    ``learner_state`` is ``QLearner.state_dict()``: its :func:`policy_key` entry is what
-    acting needs.
+    ``learner_state`` is ``QLearner.state_dict()``: its ``agent`` entry is what acting needs.
     ``selection`` is the evaluation that chose these weights (for ``best.pt``).
     ``starts`` is the start replay's state (``StartReplay.state_dict()``), for ``--resume``.
     """

@@ -1,11 +1,12 @@
 """``neuronsmae-train``: train IQL, VDN or QMIX blue agents against the rule-based red bot.
 
 Layers, later ones winning: the defaults of :class:`TrainConfig`, ``--preset paper`` (the
-paper's hyper-parameters), ``--config FILE`` (TOML or
-JSON), ``--set key=value`` (repeatable), then the dedicated flags (``--alg``, ``--level``,
-``--workers``, ...). With ``--resume`` the run directory's saved ``config.json`` replaces the
-defaults, so a resumed run keeps its settings unless told otherwise (e.g. a larger
-``--episodes``). Unknown keys are errors that list the valid ones.
+paper's hyper-parameters), ``--config FILE`` (TOML or JSON), ``--set key=value``
+(repeatable; ``learner.lr=1e-3``, or ``lr=1e-3`` since the name is unique), then the
+dedicated flags (``--alg``, ``--level``, ``--workers``, ...). With ``--resume`` the run
+directory's saved ``config.json`` replaces the defaults, so a resumed run keeps its settings
+unless told otherwise (e.g. a larger ``--episodes``). Unknown or ambiguous keys are errors
+that list the valid ones; ``--help-config`` lists every key by group.
 
 Example: ``neuronsmae-train --alg vdn --level easy`` trains locally with the defaults and
 prints the final greedy win rate on held-out seeds.
@@ -23,6 +24,8 @@ from typing import Any
 
 from neuronsmae.trainers.config import (
     ENV_KINDS,
+    GROUPS,
+    KEYS,
     LEVELS,
     PRESETS,
     ConfigError,
@@ -69,13 +72,27 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-FLAG_KEYS = ("alg", "level", "workers", "episodes", "out", "seed", "env", "address", "sync")
-"""Flags that map one-to-one onto config keys."""
+FLAG_KEYS = {
+    "alg": "alg",
+    "level": "level",
+    "workers": "workers",
+    "episodes": "episodes",
+    "out": "out",
+    "seed": "seed",
+    "env": "env",
+    "address": "cluster.address",
+    "sync": "sync",
+}
+"""Flags that map one-to-one onto config keys: flag name → key."""
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     """Build the config from the layers described in the module docstring."""
-    flags: dict[str, Any] = {k: getattr(args, k) for k in FLAG_KEYS if getattr(args, k) is not None}
+    flags: dict[str, Any] = {
+        key: getattr(args, flag)
+        for flag, key in FLAG_KEYS.items()
+        if getattr(args, flag) is not None
+    }
     if args.quiet:
         flags["progress"] = False
     layers = [preset(args.preset)] if args.preset else []
@@ -92,10 +109,16 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
 
 def print_config_help() -> None:
-    """Every config key with its default and docstring."""
+    """Every config key by group, with its default and docstring."""
     defaults = TrainConfig().to_dict()
-    for key, doc in field_docs().items():
-        print(f"{key} = {defaults[key]!r}\n    {doc}")
+    docs = field_docs()
+    for group in ("", *GROUPS):
+        keys = [k for k in KEYS if k.rpartition(".")[0] == group]
+        title = f"[{group}]  {group}.<key>, or the bare key" if group else "[top level]"
+        print(f"{title}\n")
+        for key in keys:
+            value = defaults[group][key.rpartition(".")[2]] if group else defaults[key]
+            print(f"{key} = {value!r}\n    {docs[key]}\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

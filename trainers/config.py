@@ -1,9 +1,17 @@
-"""Training configuration: one frozen dataclass, built from defaults, a file and overrides.
+"""Training configuration: one frozen dataclass of groups, built from defaults, a file and
+overrides.
 
 CleanRL style: every knob is a field with a docstring, so ``neuronsmae-train --help-config``
-can print them. A configuration is built in layers — defaults, then a TOML or JSON file, then
-``--set key=value`` overrides, then the explicit command-line flags — and every layer rejects
-a key the dataclass does not have (:class:`ConfigError` lists the valid ones), so a typo can
+can print them. :class:`TrainConfig` holds what a run is (algorithm, opponent, budget,
+sampling) at its top level and nests the groups: ``learner`` (:class:`LearnerConfig`, the
+algorithm's hyper-parameters), ``eval`` (:class:`EvalConfig`), ``cluster``
+(:class:`ClusterConfig`) and ``experimental`` (:class:`ExperimentalConfig`, off by default).
+
+A key is a top-level name (``alg``), a group and a name (``learner.lr``), or a bare name that
+exists in exactly one group (``lr``). A configuration is built in layers — defaults, then a
+TOML or JSON file (flat, dotted keys, or ``[learner]``-style tables), then ``--set
+key=value`` overrides, then the explicit command-line flags — and every layer rejects a key
+the configuration does not have (:class:`ConfigError` lists the valid ones), so a typo can
 never silently train with a default.
 """
 
@@ -19,51 +27,48 @@ import os
 import sys
 import types
 import typing
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
+from neuronsmae.trainers.config_groups import (
+    ClusterConfig,
+    ConfigError,
+    EvalConfig,
+    LearnerConfig,
+    check_choice,
+    check_positive,
+    parse_resources,
+)
+from neuronsmae.trainers.experimental.config import ExperimentalConfig
 from neuronsmae.trainers.mixers import ALGORITHMS
-from neuronsmae.trainers.symmetry import parse_generators
+
+__all__ = [
+    "ClusterConfig",
+    "ConfigError",
+    "EvalConfig",
+    "ExperimentalConfig",
+    "LearnerConfig",
+    "TrainConfig",
+    "field_docs",
+    "make_config",
+    "parse_overrides",
+    "parse_resources",
+    "preset",
+    "read_config_file",
+]
 
 LEVELS = ("easy", "middle", "hard")
 """Opponent bot levels of the cooperative task."""
 ENV_KINDS = ("inprocess", "remote")
 """``inprocess``: each worker owns an ``Arena``; ``remote``: each owns an ``RM`` client."""
 
-SERVER_PLACEMENTS = ("local", "actors")
-"""``remote``: where each worker's server runs (see ``trainers/placement.py``)."""
-
-
-class ConfigError(ValueError):
-    """An unknown key, a value of the wrong type, or a value out of range."""
-
-
-def parse_resources(text: str) -> dict[str, float]:
-    """``"sampler=1,big_node=0.5"`` → ``{"sampler": 1.0, "big_node": 0.5}`` ("" → {}).
-
-    Only custom resources: CPUs are ``worker_cpus``, and Ray owns the built-in names.
-    """
-    out: dict[str, float] = {}
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        name, sep, amount = (x.strip() for x in item.partition("="))
-        try:
-            value = float(amount) if sep else 1.0
-        except ValueError:
-            raise ConfigError(f"resource {item!r}: expected name=amount") from None
-        if not name or value <= 0 or name in ("CPU", "GPU", "memory", "object_store_memory"):
-            raise ConfigError(f"resource {item!r}: expected a custom name and an amount > 0")
-        out[name] = value
-    return out
-
 
 @dataclass(frozen=True)
 class TrainConfig:
     """Everything one training run needs; saved next to its checkpoints."""
 
-    # --- experiment --------------------------------------------------------------------
     alg: str = "vdn"
     """Algorithm: iql (no mixer), vdn (sum) or qmix (monotonic hypernetwork mixer)."""
     level: str = "easy"
@@ -71,231 +76,51 @@ class TrainConfig:
     seed: int = 1
     """Seeds the networks, exploration, replay sampling and the training episodes."""
     episodes: int = 30_000
-    """Training episodes in total (a resumed run continues until this many). The default is
-    the paper's budget (20 workers × 1,501 iterations); on a 2-core machine ``max_minutes``
-    ends the run long before it."""
+    """Training episodes in total, ≥ 1 (a resumed run continues until this many). The default
+    is the paper's budget (20 workers × 1,501 iterations); on a 2-core machine
+    ``max_minutes`` ends the run long before it."""
     max_minutes: float = 30.0
     """Wall-clock budget of this session's training in minutes (0: none; a resumed run gets a
     fresh budget); the final evaluation follows. 30 minutes is the target run's budget
     (VDN against the easy bot, docs/results.md), so the default run is that run."""
     out: str = ""
     """Run directory; empty means runs/<alg>_<level>_s<seed>."""
-    # --- environment -------------------------------------------------------------------
     env: str = "inprocess"
     """inprocess: each worker owns an Arena; remote: each owns an RM client of its server."""
-    base_port: int = 10000
-    """remote: worker i talks to the server on base_port + i."""
     coef: float = 1.0
     """Context 'coef': multiplies the damage the bots deal."""
-    # --- sampling ----------------------------------------------------------------------
     workers: int = 0
     """Rollout workers (Ray actors); 0 means one per core less one for the learner, and at
-    least two: on 2 cores, two half-CPU workers beside the learner bought 25 % more episodes
-    in 30 minutes than one (docs/results.md, runs A and B), and the target run uses two."""
-    worker_cpus: float = 0.5
-    """CPUs Ray reserves per worker (fractions let workers share a core with the learner)."""
+    least two. Measured on 2 cores: two half-CPU workers beside the learner play 25 % more
+    episodes in 30 minutes than one (``python bench/bench_learning.py --workers 1`` against
+    the default two)."""
     sync: bool = False
     """Paper's loop: one episode from every worker, then learn; else learn as episodes land."""
-    address: str = ""
-    """Ray cluster to join (ray.init address); empty always starts a new local Ray."""
-    max_worker_failures: int = 5
-    """Consecutive failures after which a worker is given up instead of restarted."""
-    worker_resources: str = ""
-    """Custom Ray resources each worker also requires, "name=amount[,...]" (e.g. "sampler=1"
-    puts workers only on nodes started with --resources '{"sampler": N}', N per node)."""
-    servers: str = "local"
-    """remote: local (each worker launches its server on its own node, loopback only) or
-    actors (a Ray actor per worker runs its server on a node Ray picks, reached by node IP)."""
-    server_resources: str = ""
-    """servers=actors: custom Ray resources each server actor requires, like worker_resources."""
-    router: str = ""
-    """remote: reach server base_port + i through this Zenoh router (tcp/host:7447) instead;
-    the servers run outside Ray (neuronsmae-serve --router). See deploy/README.md."""
-    # --- learning ----------------------------------------------------------------------
-    lr: float = 5e-4
-    """Adam learning rate (paper: 5e-4). 1e-3 reaches 0.8 against the easy bot sooner but
-    stays there; 5e-4 climbs higher (docs/results.md)."""
-    lr_final: float = -1.0
-    """Learning rate at the end of the run's budget, reached linearly from ``lr`` (negative:
-    keep ``lr`` constant). The budget is whichever of ``episodes`` and ``max_minutes`` runs out
-    first, so a wall-clock run and an episode-capped run both end at ``lr_final``."""
-    gamma: float = 0.99
-    """Discount (paper: 0.99)."""
-    eps_start: float = 0.2
-    """Initial exploration ε (paper: 0.2)."""
-    eps_end: float = 0.05
-    """Final exploration ε (paper: 0.05)."""
-    eps_anneal_episodes: int = 1500
-    """Training episodes over which ε falls linearly from eps_start to eps_end."""
-    start_replay: float = 0.0
-    """Probability that a training episode replays a recent start the team did not win
-    instead of a fresh seed (0: never, the paper's uniform starts); see trainers/starts.py.
-    Why: the agents lose mostly the starts they already judge bad, and uniform seeds give
-    those starts only their small share of the data. With 0.3, VDN against the easy bot
-    tested at 0.955, 0.92 and 0.935 on seeds 1–3 where the defaults read 0.91, 0.905 and
-    0.93 (docs/results.md, runs AI–AK against AF–AH). It learns sooner more than it learns
-    better: validation from 9,000 episodes on averages the same (0.915 against 0.923).
-    Off by default: the defaults keep the paper's uniform starts, so a default run measures
-    the algorithm the paper measured."""
-    start_replay_plays: int = 3
-    """A lost start is played at most this many times in all, so unwinnable starts leave."""
-    start_replay_capacity: int = 256
-    """Lost starts kept for replay, the most recent ones (the queue follows the policy)."""
-    target_update_interval: int = 100
-    """Gradient updates between hard target refreshes (100 = every 50 episodes at the default
-    2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100 episodes).
-    Refreshing every 10 episodes kept the greedy win rate oscillating."""
-    grad_clip: float = 10.0
-    """Gradient-norm clip (paper: 10)."""
-    agent_hidden: int = 128
-    """GRU width of the shared agent network (paper: 128)."""
-    mixer_embed: int = 32
-    """QMIX mixing-layer width (paper: 32)."""
-    hypernet_hidden: int = 64
-    """QMIX hypernetwork hidden width."""
-    td_lambda: float = 0.3
-    """λ of the TD(λ) targets (0: the paper's one-step targets; PyMARL2 uses 0.6). Against
-    the easy bot in 30 minutes the test split read 0.89 / 0.885 / 0.86 on seeds 1-3 with
-    0.3, 0.90 / 0.86 with 0.1, 0.86 / 0.875 with 0.6, and 0.77 on seed 1 with 0.9
-    (docs/results.md, runs Z, AA, AD, AB, AC, P, R, W): short returns carry fewer of the
-    ε-greedy actions' consequences into the targets, while λ > 0 still moves a win's +20
-    back faster."""
-    double_q: bool = True
-    """Pick the next action with the online network, value it with the target network."""
-    eval_ema: float = 0.0
-    """Rate τ of an exponential moving average of the agent's weights, taken after every
-    gradient step (average += τ·(weights − average)); 0 turns it off. When on, the average
-    is the policy that evaluations measure, ``best.pt`` keeps and checkpoints give to the
-    match command, while sampling keeps acting with the latest weights. Why: past the
-    plateau the latest weights wander between policies of equal quality that lose
-    different games, and averaging them behaves like an ensemble of the recent ones.
-    Measured against the easy bot with 0.001 (docs/results.md, run T): the highest
-    validation curve of any run, but 0.825 on the test split, no better than without."""
-    features: str = "relative"
-    """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
-    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2),
-    exposure (relative, plus what each candidate point offers the other enemy; no better than
-    relative against the easy bot in 30 minutes, docs/results.md) or sight (exposure, plus
-    which tall walls stand between the robots and between each point and the other enemy;
-    0.86 against the easy bot, run X, no better either)."""
-    head: str = "points"
-    """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
-    that scores each action from its enemy's and point's features; needs 'relative' or
-    'exposure'). On the easy bot it roughly doubles the greedy win rate after 500 episodes
-    (bench_learning)."""
-    augment: str = "enemies,field,allies"
-    """Replay each sampled episode under a random symmetry of the task, so the learner sees
-    every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
-    enemy slots), field (turn the scene half a turn about the field's centre) and allies
-    (swap the agents); see trainers/symmetry.py. Against the easy bot all three reach the
-    0.85 plateau in about half the episodes (0.74-0.86 after 1,000 against 0.625-0.78
-    without), but not higher (docs/results.md, runs P-R)."""
-    last_action_input: bool = True
-    """Give the agent network its one-hot last action."""
-    agent_id_input: bool = True
-    """Give the agent network its one-hot agent index."""
-    ally_action_input: bool = False
-    """Give each agent its team-mates' one-hot last actions too: the enemy and candidate
-    point each mate is heading for, which its pose does not show. Decisions are
-    simultaneous, so without it an agent can only guess where its mate will be when
-    choosing a point that complements it. Executing such a policy on robots needs the mates
-    to share their last choice (one byte per decision). Against the easy bot, two seeds
-    tested at 0.87 and 0.79 (docs/results.md, runs U and V), no better than without."""
-    buffer_size: int = 5000
-    """Replay capacity in episodes."""
-    batch_size: int = 32
-    """Episodes per gradient update."""
-    priority_alpha: float = 0.0
-    """Prioritised replay: draw episodes with probability ∝ (mean |TD error| of their last
-    replay) ** α; 0 samples uniformly (the paper's and PyMARL's buffer). With 0.6 against
-    the easy bot the test split read 0.855 / 0.87 (docs/results.md, run Y), no better."""
-    priority_beta: float = 0.4
-    """Exponent of prioritised replay's importance weights at the start of the run; it rises
-    linearly to 1 over the budget, so late updates are unbiased."""
-    learning_starts: int = 64
-    """Episodes in the buffer before learning begins."""
-    train_every: int = 1
-    """Asynchronous mode: episodes collected between training rounds."""
-    updates_per_round: int = 2
-    """Gradient updates per training round (per iteration in synchronous mode)."""
-    # --- evaluation and records -------------------------------------------------------
-    eval_every: int = 500
-    """Training episodes between greedy evaluations (0 disables them until the end)."""
-    eval_episodes: int = 50
-    """Greedy episodes per evaluation, on held-out seeds."""
-    final_eval_episodes: int = 200
-    """Greedy episodes of the final evaluation at the end of the run (200: a win rate near
-    0.9 is then known to about ±0.04)."""
-    eval_seed: int = 1_000_000_000
-    """First held-out seed; training episodes use seeds below it. Periodic evaluations
-    (validation) use ``eval_seed + k``; the final evaluation (test) uses
-    ``eval_seed + TEST_SEED_OFFSET + k``, so the figures reported at the end never come from
-    the seeds that chose the best weights."""
-    keep_best: bool = True
-    """Keep the weights of the best periodic evaluation, write them to ``best.pt`` and
-    evaluate them on the test seeds at the end beside the final weights (model selection
-    on validation seeds, as is usual when reporting greedy win rates). Equal readings go to
-    the later weights, which trained longer."""
-    checkpoint_every: int = 1000
-    """Training episodes between checkpoints (one is always written at the end)."""
     torch_threads: int = 1
     """Torch intra-op threads for the learner (workers always use 1)."""
     progress: bool = True
     """Show the live tqdm progress bar."""
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    """The algorithm's hyper-parameters (keys ``learner.<name>``)."""
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    """Greedy evaluations, model selection and checkpoints (keys ``eval.<name>``)."""
+    cluster: ClusterConfig = field(default_factory=ClusterConfig)
+    """Ray cluster, worker placement and remote servers (keys ``cluster.<name>``)."""
+    experimental: ExperimentalConfig = field(default_factory=ExperimentalConfig)
+    """Experiments, off by default (keys ``experimental.<name>``)."""
 
     def __post_init__(self) -> None:
-        _check_choice("alg", self.alg, sorted(ALGORITHMS))
-        _check_choice("level", self.level, LEVELS)
-        _check_choice("env", self.env, ENV_KINDS)
-        _check_choice("servers", self.servers, SERVER_PLACEMENTS)
-        parse_resources(self.worker_resources)
-        parse_resources(self.server_resources)
-        _check_choice("features", self.features, sorted(FEATURES))
-        _check_choice("head", self.head, ("flat", "points"))
-        if self.head == "points" and self.features not in POINT_FEATURES:
+        check_choice("alg", self.alg, sorted(ALGORITHMS))
+        check_choice("level", self.level, LEVELS)
+        check_choice("env", self.env, ENV_KINDS)
+        check_positive(self, "episodes", "torch_threads")
+        if self.workers < 0 or self.max_minutes < 0:
             raise ConfigError(
-                f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"
+                f"workers and max_minutes must be ≥ 0, got {self.workers} and {self.max_minutes}"
             )
-        try:
-            parse_generators(self.augment)
-        except ValueError as err:
-            raise ConfigError(str(err)) from None
-        for name in (
-            "episodes",
-            "batch_size",
-            "buffer_size",
-            "train_every",
-            "updates_per_round",
-            "target_update_interval",
-            "agent_hidden",
-            "mixer_embed",
-            "hypernet_hidden",
-            "eval_episodes",
-            "torch_threads",
-        ):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be ≥ 1, got {getattr(self, name)}")
-        if self.workers < 0 or self.worker_cpus <= 0:
-            raise ConfigError("workers must be ≥ 0 and worker_cpus > 0")
-        if self.lr <= 0:
-            raise ConfigError(f"lr must be > 0, got {self.lr}")
-        if not 0.0 <= self.eps_end <= 1.0 or not 0.0 <= self.eps_start <= 1.0:
-            raise ConfigError("eps_start and eps_end must lie in [0, 1]")
-        if self.priority_alpha < 0 or not 0.0 <= self.priority_beta <= 1.0:
-            raise ConfigError(
-                f"priority_alpha must be ≥ 0 (0 = uniform) and priority_beta in [0, 1], got "
-                f"{self.priority_alpha} and {self.priority_beta}"
-            )
-        if not 0.0 <= self.start_replay <= 1.0:
-            raise ConfigError(f"start_replay must lie in [0, 1] (0 = off), got {self.start_replay}")
-        if self.start_replay_plays < 2 or self.start_replay_capacity < 1:
-            raise ConfigError(
-                "start_replay_plays must be ≥ 2 (a first play and a replay) and "
-                f"start_replay_capacity ≥ 1, got {self.start_replay_plays} and "
-                f"{self.start_replay_capacity}"
-            )
-        if not 0.0 <= self.eval_ema < 1.0:
-            raise ConfigError(f"eval_ema must lie in [0, 1) (0 = off), got {self.eval_ema}")
+        for name, kind in GROUPS.items():
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(f"{name} must be a {kind.__name__}")
 
     @property
     def run_dir(self) -> Path:
@@ -306,39 +131,32 @@ class TrainConfig:
         """Worker count: as configured, else one per core less one for the learner (≥ 2)."""
         return self.workers or max(2, (os.cpu_count() or 2) - 1)
 
-    def lr_at(self, progress: float) -> float:
-        """The learning rate at ``progress`` ∈ [0, 1] of the budget (see ``lr_final``)."""
-        if self.lr_final < 0:
-            return self.lr
-        return _linear(self.lr, self.lr_final, progress)
-
-    def beta_at(self, progress: float) -> float:
-        """Prioritised replay's importance-weight exponent at ``progress`` ∈ [0, 1]."""
-        return _linear(self.priority_beta, 1.0, progress)
-
     def to_dict(self) -> dict[str, Any]:
-        """Plain values only (JSON- and ``torch.load(weights_only=True)``-safe)."""
+        """Plain values, the groups as nested dicts (JSON- and
+        ``torch.load(weights_only=True)``-safe)."""
         return dataclasses.asdict(self)
 
 
-def _linear(start: float, end: float, progress: float) -> float:
-    """``start`` at progress 0, ``end`` from progress 1 on, linear in between: the shape of
-    every schedule over a run's budget."""
-    return start + min(max(progress, 0.0), 1.0) * (end - start)
-
+GROUPS: dict[str, type] = {
+    "learner": LearnerConfig,
+    "eval": EvalConfig,
+    "cluster": ClusterConfig,
+    "experimental": ExperimentalConfig,
+}
+"""The groups nested in :class:`TrainConfig`, by field name."""
 
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
-        "lr": 5e-4,
-        "td_lambda": 0.0,
-        "target_update_interval": 5,
-        "features": "raw",
-        "head": "flat",
-        "augment": "none",
+        "learner.lr": 5e-4,
+        "learner.td_lambda": 0.0,
+        "learner.target_update_interval": 5,
+        "learner.features": "raw",
+        "learner.head": "flat",
+        "learner.augment": "none",
         "sync": True,
-        "train_every": 1,
-        "updates_per_round": 1,
-        "eps_anneal_episodes": 2000,
+        "learner.train_every": 1,
+        "learner.updates_per_round": 1,
+        "learner.eps_anneal_episodes": 2000,
         "max_minutes": 0.0,
         "episodes": 30_000,
     },
@@ -359,41 +177,59 @@ def preset(name: str) -> dict[str, Any]:
         raise ConfigError(f"unknown preset {name!r}; valid: {', '.join(sorted(PRESETS))}") from None
 
 
-def _check_choice(name: str, value: Any, valid: Iterable[Any]) -> None:
-    valid = list(valid)
-    if value not in valid:
-        raise ConfigError(f"{name}={value!r} is not valid; valid: {', '.join(map(str, valid))}")
+# --- keys ------------------------------------------------------------------------------
 
 
-def field_docs() -> dict[str, str]:
-    """Each field's docstring, read from the source (for ``--help-config``)."""
-    tree = ast.parse(inspect.getsource(TrainConfig))
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    docs: dict[str, str] = {}
-    for node, after in itertools.pairwise(body):
-        if isinstance(node, ast.AnnAssign) and isinstance(after, ast.Expr):
-            docs[node.target.id] = str(after.value.value)  # type: ignore[attr-defined]
-    return docs
+def _fields(cls: type) -> Iterator[tuple[str, Any]]:
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        yield f.name, hints[f.name]
 
 
-def _types() -> dict[str, Any]:
-    return typing.get_type_hints(TrainConfig)
+def _key_types() -> dict[str, Any]:
+    """Every key in full (``alg``, ``learner.lr``, ...) and its field's type, top level first."""
+    keys = {name: kind for name, kind in _fields(TrainConfig) if name not in GROUPS}
+    for group, cls in GROUPS.items():
+        keys.update({f"{group}.{name}": kind for name, kind in _fields(cls)})
+    return keys
 
 
-def _unknown(keys: Iterable[str], where: str) -> None:
-    valid = [f.name for f in dataclasses.fields(TrainConfig)]
-    bad = [k for k in keys if k not in valid]
-    if bad:
-        hints = {k: difflib.get_close_matches(k, valid, n=1) for k in bad}
-        said = ", ".join(
-            f"{k!r}" + (f" (did you mean {h[0]!r}?)" if h else "") for k, h in hints.items()
-        )
-        raise ConfigError(f"unknown config key(s) in {where}: {said}; valid: {', '.join(valid)}")
+KEYS = _key_types()
+"""Every configuration key in full and its type."""
+
+
+def _resolve(key: str, where: str) -> str:
+    """The full key ``key`` names: itself, or the one group key whose name it is."""
+    if key in KEYS:
+        return key
+    matches = [full for full in KEYS if full.rpartition(".")[2] == key]
+    if len(matches) == 1:
+        return matches[0]
+    if matches:
+        raise ConfigError(f"config key {key!r} in {where} is ambiguous: use one of {matches}")
+    names = [*KEYS, *(full.rpartition(".")[2] for full in KEYS if "." in full)]
+    hint = difflib.get_close_matches(key, names, n=1)
+    said = f"{key!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+    if key in GROUPS:
+        said += f" (a group: set {key}.<name>, or give a table of its keys)"
+    raise ConfigError(f"unknown config key {said} in {where}; valid: {', '.join(KEYS)}")
+
+
+def flatten(layer: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """A layer's keys in full: dotted and bare keys resolved, group tables opened."""
+    out: dict[str, Any] = {}
+    for key, value in layer.items():
+        if key in GROUPS and isinstance(value, Mapping):
+            inner = flatten({f"{key}.{k}": v for k, v in value.items()}, where)
+            out.update(inner)
+        else:
+            out[_resolve(str(key), where)] = value
+    return out
 
 
 def _coerce(key: str, value: Any) -> Any:
     """Convert a file or command-line value to the field's type, or raise ConfigError."""
-    kind = _types()[key]
+    kind = KEYS[key]
     if isinstance(kind, types.UnionType):
         kind = next(a for a in typing.get_args(kind) if a is not type(None))
     if isinstance(value, str) and kind is not str:
@@ -415,8 +251,24 @@ def _coerce(key: str, value: Any) -> Any:
     return value
 
 
+def field_docs() -> dict[str, str]:
+    """Each key's docstring, read from the source, in :data:`KEYS` order (``--help-config``)."""
+    docs: dict[str, str] = {}
+    for prefix, cls in [("", TrainConfig), *((f"{g}.", c) for g, c in GROUPS.items())]:
+        body = ast.parse(inspect.getsource(cls)).body[0].body  # type: ignore[attr-defined]
+        for node, after in itertools.pairwise(body):
+            if isinstance(node, ast.AnnAssign) and isinstance(after, ast.Expr):
+                name = node.target.id  # type: ignore[attr-defined]
+                docs[prefix + name] = str(after.value.value)  # type: ignore[attr-defined]
+    return {key: docs[key] for key in KEYS}
+
+
+# --- layers ----------------------------------------------------------------------------
+
+
 def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read a TOML or JSON file of config keys (flat, or under a ``[train]`` table)."""
+    """Read a TOML or JSON file of config keys (top-level keys, dotted keys or group tables,
+    optionally all under a ``[train]`` table); return them in full."""
     p = Path(path)
     if p.suffix == ".toml":
         if sys.version_info < (3, 11):
@@ -430,26 +282,29 @@ def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ConfigError(f"config file {p} must end in .toml or .json")
     if isinstance(data.get("train"), dict) and len(data) == 1:
         data = data["train"]
-    _unknown(data, str(p))
-    return data
+    return flatten(data, str(p))
 
 
 def parse_overrides(items: Iterable[str]) -> dict[str, str]:
-    """``["key=value", ...]`` → ``{key: value}``; values are coerced later."""
+    """``["key=value", ...]`` → ``{full key: value}``; values are coerced later."""
     out: dict[str, str] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--set expects key=value, got {item!r}")
-        out[key.strip()] = value
-    _unknown(out, "--set")
+        out[_resolve(key.strip(), "--set")] = value
     return out
 
 
 def make_config(*layers: Mapping[str, Any], base: TrainConfig | None = None) -> TrainConfig:
-    """Apply the layers in order over ``base`` (fresh defaults if none), checking each key."""
+    """Apply the layers in order over ``base`` (fresh defaults if none), checking each key.
+
+    A layer's keys may be full, bare or group tables (a saved ``config.json`` is one layer).
+    """
     values = (base or TrainConfig()).to_dict()
     for i, layer in enumerate(layers):
-        _unknown(layer, f"layer {i}")
-        values.update({k: _coerce(k, v) for k, v in layer.items()})
-    return TrainConfig(**values)
+        for key, value in flatten(layer, f"layer {i}").items():
+            group, _, name = key.rpartition(".")
+            (values[group] if group else values)[name] = _coerce(key, value)
+    groups = {name: cls(**values.pop(name)) for name, cls in GROUPS.items()}
+    return TrainConfig(**values, **groups)

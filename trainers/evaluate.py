@@ -3,8 +3,7 @@
 :func:`evaluate_checkpoint` is what ``neuronsmae-match --blue runs/.../checkpoint.pt`` calls:
 it plays the checkpoint's agents greedily (ε = 0, available actions only) against the bot
 on seeds ``seed, seed+1, ...`` in an in-process arena and returns the win rate.
-:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers, and
-:class:`EnsemblePolicy` several checkpoints acting as one.
+:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ from neuronsmae.trainers.agent import masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
 from neuronsmae.trainers.config import LEVELS
-from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
 
@@ -55,7 +53,7 @@ class GreedyPolicy:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         policy = load_policy(path)
         self.spec = policy.spec
-        self.featurize = get_features(policy.spec.features)
+        self.featurize = policy.spec.featurizer()
         self.agent = policy.spec.build().eval()
         self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
         self.hidden: torch.Tensor | None = None
@@ -87,43 +85,6 @@ class GreedyPolicy:
 
     def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
         """Greedy available action of every agent, given their observations and masks."""
-        return act_greedily(self, obs, avail)[0]
-
-
-class EnsemblePolicy:
-    """Several checkpoints acting as one: greedy on the mean of their Q-values.
-
-    Every member keeps its own recurrent state and is told the ensemble's actions, so each
-    sees the episode it would see if it acted alone and chose those actions. Why: runs that
-    reach the same win rate lose different games (``python -m bench.agreement``), and
-    averaging their values decides the close calls on which they disagree.
-    """
-
-    def __init__(self, paths: Sequence[str | os.PathLike[str]]) -> None:
-        if not paths:
-            raise ValueError("an ensemble needs at least one checkpoint")
-        self.members = [GreedyPolicy(p) for p in paths]
-        actions = {m.spec.n_actions for m in self.members}
-        if len(actions) != 1:
-            raise ValueError(f"the checkpoints disagree on the number of actions: {actions}")
-
-    def reset(self) -> None:
-        """Forget every member's recurrent state at the start of an episode."""
-        for member in self.members:
-            member.reset()
-
-    @torch.no_grad()
-    def q_values(self, obs: Sequence[np.ndarray]) -> torch.Tensor:
-        """The members' mean Q-values ``[n_agents, n_actions]``; advances their states."""
-        return torch.stack([m.q_values(obs) for m in self.members]).mean(dim=0)
-
-    def chose(self, actions: torch.Tensor) -> None:
-        """Tell every member the actions the ensemble took."""
-        for member in self.members:
-            member.chose(actions)
-
-    def act(self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray]) -> list[int]:
-        """Greedy available action on the members' mean Q-values."""
         return act_greedily(self, obs, avail)[0]
 
 

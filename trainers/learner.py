@@ -16,40 +16,44 @@ import numpy as np
 import torch
 from torch import nn
 
+from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Batch
-from neuronsmae.trainers.features import action_feature_index
+from neuronsmae.trainers.features import (
+    Featurizer,
+    UnknownFeaturesError,
+    action_feature_index,
+    feature_dim,
+    get_features,
+    raw,
+)
 from neuronsmae.trainers.mixers import make_mixer
 
 
 @dataclass(frozen=True)
 class EnvSpec:
-    """The sizes the networks need, from ``ArenaAPI.get_env_info``."""
+    """The sizes the networks and the buffer need."""
 
     n_agents: int
     """Agents controlled by the learner (the blue team)."""
     n_actions: int
     """Discrete choices per agent."""
     obs_dim: int
-    """Length of one agent's observation."""
+    """Length of one agent's observation after the feature set (what the buffer stores)."""
     state_dim: int
     """Length of the global state."""
     episode_limit: int
     """Decisions per episode at most."""
 
     @classmethod
-    def from_env_info(cls, info: dict[str, Any]) -> EnvSpec:
-        """Read the five sizes out of ``get_env_info()`` (shapes may be ints or tuples)."""
-
-        def flat(v: Any) -> int:
-            return int(np.prod(v)) if isinstance(v, list | tuple) else int(v)
-
+    def of(cls, info: EnvInfo, features: str = "raw") -> EnvSpec:
+        """The sizes of ``info``'s task, observations widened by the feature set ``features``."""
         return cls(
-            n_agents=int(info["n_agents"]),
-            n_actions=int(info["n_actions"]),
-            obs_dim=flat(info["obs_shape"]),
-            state_dim=flat(info["state_shape"]),
-            episode_limit=int(info["episode_limit"]),
+            n_agents=info.n_agents,
+            n_actions=info.n_actions,
+            obs_dim=feature_dim(features, info),
+            state_dim=info.state_shape,
+            episode_limit=info.episode_limit,
         )
 
 
@@ -71,8 +75,22 @@ class AgentSpec:
     """Feature set applied to each observation first (:mod:`neuronsmae.trainers.features`)."""
     head: str = "flat"
     """Q head: flat (one linear output per action) or points (plus a per-action scorer)."""
-    ally_actions: bool = False
-    """Feed the team-mates' one-hot last actions (the goals they are driving to)."""
+    env_info: dict[str, Any] | None = None
+    """The environment's ``get_env_info()``: the layout the features and the points head
+    read (needed unless ``features='raw'`` and ``head='flat'``)."""
+
+    def layout(self) -> EnvInfo:
+        """The environment's layout, parsed from :attr:`env_info`."""
+        if self.env_info is None:
+            raise UnknownFeaturesError(
+                f"features={self.features!r} with head={self.head!r} need the environment's "
+                "layout: build the spec with agent_spec(..., info=EnvInfo)"
+            )
+        return EnvInfo.from_dict(self.env_info)
+
+    def featurizer(self) -> Featurizer:
+        """The feature function applied to each raw observation before :meth:`inputs`."""
+        return raw if self.features == "raw" else get_features(self.features, self.layout())
 
     def inputs(self, obs: torch.Tensor, last_actions: torch.Tensor) -> torch.Tensor:
         """The network's input from featurized observations and last actions (see
@@ -83,14 +101,13 @@ class AgentSpec:
             self.n_actions,
             last_action=self.last_action,
             agent_id=self.agent_id,
-            ally_actions=self.ally_actions,
         )
 
     def build(self) -> RNNAgent:
         """A fresh network with this architecture."""
         index = None
         if self.head == "points":
-            index = torch.as_tensor(action_feature_index(self.features, self.n_actions))
+            index = torch.as_tensor(action_feature_index(self.features, self.layout()))
         return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim, index)
 
 
@@ -101,11 +118,12 @@ def agent_spec(
     agent_id: bool,
     features: str = "raw",
     head: str = "flat",
-    ally_actions: bool = False,
+    info: EnvInfo | None = None,
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
-    ``env.obs_dim`` is the width *after* the feature set (what the buffer stores).
+    ``env.obs_dim`` is the width *after* the feature set (what the buffer stores); ``info``
+    is the environment's layout, which the spec carries for the features and the head.
     """
     width = agent_input_dim(
         env.obs_dim,
@@ -113,10 +131,10 @@ def agent_spec(
         env.n_agents,
         last_action=last_action,
         agent_id=agent_id,
-        ally_actions=ally_actions,
     )
+    env_info = None if info is None else info.to_dict()
     return AgentSpec(
-        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, ally_actions
+        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, env_info
     )
 
 
@@ -176,7 +194,6 @@ class QLearner:
         mixer_embed: int,
         hypernet_hidden: int,
         td_lambda: float = 0.0,
-        eval_ema: float = 0.0,
     ) -> None:
         self.env, self.spec, self.mixer_name = env, spec, mixer
         self.td_lambda = td_lambda
@@ -189,11 +206,6 @@ class QLearner:
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
-        self.eval_ema = eval_ema
-        self.average_agent = copy.deepcopy(self.agent) if eval_ema > 0 else None
-        """Exponential moving average of the agent (``eval_ema`` > 0): the evaluated policy."""
-        self.episode_errors = torch.zeros(0)
-        """``[B]`` mean |TD error| of each episode of the last batch: its replay priority."""
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""
@@ -221,17 +233,11 @@ class QLearner:
         if not self.mixer.team_output:  # IQL: a destroyed robot has no TD error of its own
             mask = mask * batch.alive[:, :-1]
         td = (q_tot - targets) * mask  # [B, T, 1 or n]
-        squared = td**2
-        if batch.weights is not None:  # prioritised replay: undo the sampling bias
-            squared = squared * batch.weights[:, None, None]
-        loss = squared.sum() / mask.sum().clamp(min=1.0)
-        with torch.no_grad():
-            self.episode_errors = td.abs().sum((1, 2)) / mask.sum((1, 2)).clamp(min=1.0)
+        loss = (td**2).sum() / mask.sum().clamp(min=1.0)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
         self.optimizer.step()
-        self._update_average()
         self.updates += 1
         if self.updates % self.target_update_interval == 0:
             self.update_targets()
@@ -243,35 +249,19 @@ class QLearner:
             "target": float((targets * mask).sum() / mask.sum().clamp(min=1.0)),
         }
 
-    def set_lr(self, lr: float) -> None:
-        """Set the optimiser's learning rate (the trainer's schedule calls this)."""
-        for group in self.optimizer.param_groups:
-            group["lr"] = lr
-
-    @torch.no_grad()
-    def _update_average(self) -> None:
-        if self.average_agent is None:
-            return
-        for avg, new in zip(self.average_agent.parameters(), self.agent.parameters(), strict=True):
-            avg.lerp_(new, self.eval_ema)
-
     def update_targets(self) -> None:
         """Copy the online networks into the target networks (hard update)."""
         self.target_agent.load_state_dict(self.agent.state_dict())
         self.target_mixer.load_state_dict(self.mixer.state_dict())
 
     def acting_weights(self) -> dict[str, np.ndarray]:
-        """The latest weights, which sampling acts with (NumPy arrays, cheap to ship)."""
-        return _numpy_weights(self.agent)
-
-    def policy_weights(self) -> dict[str, np.ndarray]:
-        """The weights evaluations measure: the average with ``eval_ema``, else the latest."""
-        average = self.average_agent
-        return _numpy_weights(self.agent if average is None else average)
+        """The agent's latest weights, which sampling and evaluation act with (NumPy arrays,
+        cheap to ship)."""
+        return {k: v.detach().cpu().numpy().copy() for k, v in self.agent.state_dict().items()}
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to resume learning exactly (networks, targets, optimiser)."""
-        state = {
+        return {
             "agent": self.agent.state_dict(),
             "mixer": self.mixer.state_dict(),
             "target_agent": self.target_agent.state_dict(),
@@ -279,9 +269,6 @@ class QLearner:
             "optimizer": self.optimizer.state_dict(),
             "updates": self.updates,
         }
-        if self.average_agent is not None:
-            state["average_agent"] = self.average_agent.state_dict()
-        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved."""
@@ -291,10 +278,3 @@ class QLearner:
         self.target_mixer.load_state_dict(state["target_mixer"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
-        if self.average_agent is not None:  # a run that turns eval_ema on starts it afresh
-            self.average_agent.load_state_dict(state.get("average_agent", state["agent"]))
-
-
-def _numpy_weights(agent: nn.Module) -> dict[str, np.ndarray]:
-    """An agent's weights as NumPy arrays: what workers need, cheap to ship by Ray."""
-    return {k: v.detach().cpu().numpy().copy() for k, v in agent.state_dict().items()}

@@ -134,11 +134,14 @@ class ServerPool:
 def sampler_placement(cfg: TrainConfig, n_workers: int, base_seed: int) -> dict[str, Any]:
     """The placement keyword arguments of :class:`~neuronsmae.trainers.sampler.Sampler`
     for ``cfg`` (call after ``ray.init``: ``servers="actors"`` starts the servers here)."""
-    out: dict[str, Any] = {"worker_resources": parse_resources(cfg.worker_resources)}
-    if cfg.env == "remote" and cfg.router:
-        out["env_options"] = {"router": cfg.router}
-    if cfg.env == "remote" and cfg.servers == "actors" and not cfg.router:
+    out: dict[str, Any] = {"worker_resources": parse_resources(cfg.cluster.worker_resources)}
+    if cfg.env == "remote" and cfg.cluster.router:
+        out["env_options"] = {"router": cfg.cluster.router}
+    if cfg.env == "remote" and cfg.cluster.servers == "actors" and not cfg.cluster.router:
         out["servers"] = ServerPool(
-            n_workers, cfg.base_port, base_seed, parse_resources(cfg.server_resources)
+            n_workers,
+            cfg.cluster.base_port,
+            base_seed,
+            parse_resources(cfg.cluster.server_resources),
         )
     return out

@@ -17,10 +17,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuronsmae.protocol import ArenaAPI
+from neuronsmae.protocol import ArenaAPI, EnvInfo
 from neuronsmae.trainers.agent import epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
-from neuronsmae.trainers.features import get_features
 from neuronsmae.trainers.learner import AgentSpec
 
 DEFAULT_ENV_OPTIONS: Mapping[str, Any] = {
@@ -92,9 +91,8 @@ class RolloutWorker:
         torch.set_num_threads(1)  # many workers share few cores; one thread each is fastest
         self.index = index
         self.env = open_env(env_kind, env_seed, port, env_options)
-        info = self.env.get_env_info()
-        self.n_agents = int(info["n_agents"])
-        self.episode_limit = int(info["episode_limit"])
+        info = EnvInfo.from_dict(self.env.get_env_info())
+        self.n_agents, self.episode_limit = info.n_agents, info.episode_limit
         self.spec: AgentSpec | None = None
         self.agent: Any = None
         self.version = -1
@@ -124,7 +122,7 @@ class RolloutWorker:
         """
         self.set_policy(policy, version)
         spec = policy.spec
-        featurize = get_features(spec.features)
+        featurize = spec.featurizer()
         start = time.perf_counter()
         env, n = self.env, self.n_agents
         obs = [featurize(np.asarray(env.reset(contexts=dict(contexts), seed=seed), np.float32))]

@@ -7,11 +7,11 @@ valid episode after any of them:
   nearest point), not by index, so the enemy called 0 could as well have been called 1
   (up to ties); actions ``4j + k`` become ``4(1 − j) + k``.
 * ``field`` turns the whole scene half a turn about the field's centre. The layout is
-  centrally symmetric (reference.md, "Arena"; the obstacles to within 2 cm, the spawn
+  centrally symmetric (``docs/reference.md``, "Arena"; the obstacles to within 2 cm, the spawn
   ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
-  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative`` and
-  ``exposure`` features are built from differences of positions and of angles, so they do
-  not change at all; neither do ``sight``'s, tested against a map made exactly symmetric.
+  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative``
+  features are built from differences of positions and of angles, so they do not change at
+  all.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.
@@ -21,35 +21,26 @@ the network every scene in all its equivalent forms (``augment`` in the trainer'
 the way image models see flipped images: the Q-values of a relabelled scene must be the
 relabelled Q-values, and the learner no longer has to discover that from data.
 
-The transforms assume the layouts the trainers build on: the full 37-value abstract 2 v 2
-observation (``docs/options.md``), its ``relative``, ``exposure`` and ``sight`` extensions
-(:mod:`neuronsmae.trainers.features`), the 21-value global state (per robot x, y, yaw, HP,
-bullets, blue first, then the time) and 8 actions. :func:`task_group` refuses any other.
+Every column the transforms move is read from the task's layout
+(:class:`~neuronsmae.protocol.EnvInfo` and the ``relative`` features' own layout). They need
+the cooperative task with the poses in the observation and no LiDAR, abstract or discrete
+actions, two enemies for ``enemies`` and two agents for ``allies``; :func:`task_group`
+refuses any other task.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 
+from neuronsmae.protocol.env_info import EnvInfo, StateLayout
 from neuronsmae.trainers.buffer import Batch
-from neuronsmae.trainers.features import (
-    EXPOSURE_DIM,
-    EXPOSURE_PER_POINT,
-    LAYOUT_37,
-    RELATIVE_DIM,
-    RELATIVE_PER_ENEMY,
-    SIGHT_PER_ENEMY,
-    feature_dim,
-)
+from neuronsmae.trainers.features import Relative, feature_dim, get_features
 
-N_AGENTS, N_ENEMY, K = 2, 2, 4
-N_ACTIONS = N_ENEMY * K
-STATE_DIM = 5 * (N_AGENTS + N_ENEMY) + 1
 GENERATORS = ("enemies", "field", "allies")
 """Names of the symmetries :func:`task_group` can combine."""
 
@@ -122,52 +113,64 @@ def _swap(width: int, pairs: Sequence[tuple[int, int, int]]) -> torch.Tensor:
     return index
 
 
-def _enemies(obs_dim: int) -> Symmetry:
-    pairs = [(6, 9, 3), (12, 20, 2 * K), (31, 32, 1), (35, 36, 1)]
-    if obs_dim > LAYOUT_37:
-        pairs.append((LAYOUT_37, LAYOUT_37 + RELATIVE_PER_ENEMY, RELATIVE_PER_ENEMY))
-    if obs_dim > RELATIVE_DIM:
-        block = EXPOSURE_PER_POINT * K
-        pairs.append((RELATIVE_DIM, RELATIVE_DIM + block, block))
-    if obs_dim > EXPOSURE_DIM:
-        pairs.append((EXPOSURE_DIM, EXPOSURE_DIM + SIGHT_PER_ENEMY, SIGHT_PER_ENEMY))
-    state = _swap(STATE_DIM, [(5 * N_AGENTS, 5 * (N_AGENTS + 1), 5)])
+def _state_swap(state: StateLayout, a: int, b: int) -> ColumnMap:
+    """Exchange robots ``a`` and ``b`` of the global state."""
+    width = StateLayout.PER_ROBOT
+    index = _swap(state.size, [(state.robot(a).start, state.robot(b).start, width)])
+    return replace(ColumnMap.identity(state.size), index=index)
+
+
+def _enemies(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
+    obs, k = info.obs, info.obs.k
+    e0, e1 = obs.enemy(0), obs.enemy(1)
+    pairs = [
+        (obs.pose(e0)[0], obs.pose(e1)[0], 3),
+        (obs.hp_of(e0), obs.hp_of(e1), 1),
+        (obs.bullets_of(e0), obs.bullets_of(e1), 1),
+    ]
+    if k:
+        pairs.append((obs.point(0, 0)[0], obs.point(1, 0)[0], 2 * k))
+    if relative is not None:
+        pairs.append((relative.enemy_block(0).start, relative.enemy_block(1).start,
+                      relative.per_enemy))  # fmt: skip
+    relabel = [info.action(1 - j, c) for j, c in map(info.split, range(info.n_actions))]
     return Symmetry(
         "enemies",
-        replace(ColumnMap.identity(obs_dim), index=_swap(obs_dim, pairs)),
-        replace(ColumnMap.identity(STATE_DIM), index=state),
-        (torch.arange(N_ACTIONS) + K) % N_ACTIONS,
-        torch.arange(N_AGENTS),
+        replace(ColumnMap.identity(width), index=_swap(width, pairs)),
+        _state_swap(info.state, info.team_size, info.team_size + 1),
+        torch.tensor(relabel),
+        torch.arange(info.n_agents),
     )
 
 
-def _field(obs_dim: int) -> Symmetry:
-    def half_turn(width: int, xy: Sequence[int], yaw: Sequence[int]) -> ColumnMap:
-        sign, turn = torch.ones(width), torch.zeros(width, dtype=torch.bool)
+def _field(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
+    del relative  # built from differences of positions and of angles: unchanged
+
+    def half_turn(size: int, xy: Sequence[int], yaw: Sequence[int]) -> ColumnMap:
+        sign, turn = torch.ones(size), torch.zeros(size, dtype=torch.bool)
         sign[list(xy)] = -1.0
         turn[list(yaw)] = True
-        return ColumnMap(torch.arange(width), sign, turn)
+        return ColumnMap(torch.arange(size), sign, turn)
 
-    robots = N_AGENTS + N_ENEMY
-    obs_xy = [3 * r + c for r in range(robots) for c in (0, 1)] + list(range(12, 12 + 4 * K))
-    obs = half_turn(obs_dim, obs_xy, [3 * r + 2 for r in range(robots)])
-    state_xy = [5 * r + c for r in range(robots) for c in (0, 1)]
-    state = half_turn(STATE_DIM, state_xy, [5 * r + 2 for r in range(robots)])
-    return Symmetry("field", obs, state, torch.arange(N_ACTIONS), torch.arange(N_AGENTS))
+    obs = half_turn(width, info.obs.xy_columns(), info.obs.yaw_columns())
+    state = half_turn(info.state_shape, info.state.xy_columns(), info.state.yaw_columns())
+    return Symmetry("field", obs, state, torch.arange(info.n_actions), torch.arange(info.n_agents))
 
 
-def _allies(obs_dim: int) -> Symmetry:
-    state = _swap(STATE_DIM, [(0, 5, 5)])
+def _allies(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
+    del relative  # each agent keeps its own observation
     return Symmetry(
         "allies",
-        ColumnMap.identity(obs_dim),
-        replace(ColumnMap.identity(STATE_DIM), index=state),
-        torch.arange(N_ACTIONS),
+        ColumnMap.identity(width),
+        _state_swap(info.state, 0, 1),
+        torch.arange(info.n_actions),
         torch.tensor([1, 0]),
     )
 
 
-_BUILDERS = {"enemies": _enemies, "field": _field, "allies": _allies}
+Builder = Callable[[EnvInfo, Relative | None, int], Symmetry]
+"""Builds one generator from the task, the relative features (if used) and the input width."""
+_BUILDERS: dict[str, Builder] = {"enemies": _enemies, "field": _field, "allies": _allies}
 
 
 def parse_generators(text: str) -> tuple[str, ...]:
@@ -182,37 +185,26 @@ def parse_generators(text: str) -> tuple[str, ...]:
     return names
 
 
-def task_group(
-    generators: Sequence[str],
-    features: str,
-    obs_dim: int,
-    state_dim: int,
-    n_actions: int,
-    n_agents: int,
-) -> list[Symmetry]:
-    """Every element of the group the named generators span, identity first.
+def task_group(generators: Sequence[str], features: str, info: EnvInfo) -> list[Symmetry]:
+    """Every element of the group the named generators span, identity first, acting on
+    observations after the feature set ``features``.
 
-    ``obs_dim`` is the width *after* the feature set. No generators give the identity
-    alone, for any task; otherwise raises :class:`UnknownSymmetryError` if the task is not
-    the abstract 2 v 2 whose layouts the transforms know.
+    No generators give the identity alone, for any task; otherwise raises
+    :class:`UnknownSymmetryError` for a task the transforms do not know (module docstring).
     """
+    width = feature_dim(features, info)
     base = Symmetry(
         "identity",
-        ColumnMap.identity(obs_dim),
-        ColumnMap.identity(state_dim),
-        torch.arange(n_actions),
-        torch.arange(n_agents),
+        ColumnMap.identity(width),
+        ColumnMap.identity(info.state_shape),
+        torch.arange(info.n_actions),
+        torch.arange(info.n_agents),
     )
     if not generators:
         return [base]
-    expected = feature_dim(features, LAYOUT_37)
-    if (obs_dim, state_dim, n_actions, n_agents) != (expected, STATE_DIM, N_ACTIONS, N_AGENTS):
-        raise UnknownSymmetryError(
-            f"augment knows the abstract 2 v 2 layouts only (obs {expected} with features "
-            f"{features!r}, state {STATE_DIM}, {N_ACTIONS} actions, {N_AGENTS} agents); got obs "
-            f"{obs_dim}, state {state_dim}, {n_actions} actions, {n_agents} agents. "
-            "Use augment='none'"
-        )
+    _check_task(generators, info)
+    featurizer = get_features(features, info)
+    relative = featurizer if isinstance(featurizer, Relative) else None
     group = [base]
     for chosen in itertools.product((False, True), repeat=len(generators)):
         if not any(chosen):
@@ -220,9 +212,27 @@ def task_group(
         element = base
         for name, use in zip(generators, chosen, strict=True):
             if use:
-                element = element.then(_BUILDERS[name](obs_dim))
+                element = element.then(_BUILDERS[name](info, relative, width))
         group.append(replace(element, name=element.name.removeprefix("identity+")))
     return group
+
+
+def _check_task(generators: Sequence[str], info: EnvInfo) -> None:
+    needs = {
+        "the cooperative mode": info.mode == "cooperative" and info.n_agents == info.team_size,
+        "poses in the observation and no LiDAR": info.obs.vector and not info.obs.lidar_beams,
+        "abstract or discrete actions": info.action_space in ("abstract", "discrete"),
+        "two enemies": "enemies" not in generators or info.n_enemies == 2,
+        "two agents": "allies" not in generators or info.n_agents == 2,
+    }
+    missing = [need for need, met in needs.items() if not met]
+    if missing:
+        raise UnknownSymmetryError(
+            f"augment={','.join(generators)!r} needs {', '.join(missing)}; this task has "
+            f"mode={info.mode!r}, {info.n_agents} agents, {info.n_enemies} enemies, "
+            f"action_space={info.action_space!r}, vector_obs={info.vector_obs}, "
+            f"lidar_beams={info.lidar_beams}. Use augment='none'"
+        )
 
 
 _EPISODE_FIELDS = ("obs", "state", "avail", "alive", "actions", "last_actions")

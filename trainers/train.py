@@ -24,34 +24,33 @@ import random
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 import ray
 import torch
 
+from neuronsmae.protocol import EnvInfo
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
 from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
     Counters,
     load_checkpoint,
-    policy_key,
     policy_weights,
     restore_rng,
     save_checkpoint,
 )
 from neuronsmae.trainers.config import TrainConfig
 from neuronsmae.trainers.evaluate import summarize
-from neuronsmae.trainers.features import feature_dim
+from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement
 from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy
 from neuronsmae.trainers.sampler import Request, Sampler
-from neuronsmae.trainers.starts import StartReplay
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
 
 TEST_SEED_OFFSET = 10_000_000
@@ -78,8 +77,9 @@ class Trainer:
         self.run_dir = cfg.run_dir
         self.counters = Counters()
         self.np_rng = np.random.default_rng(cfg.seed)
+        exp = cfg.experimental
         self.starts = StartReplay(
-            cfg.start_replay, cfg.start_replay_plays, cfg.start_replay_capacity, cfg.seed
+            exp.start_replay, exp.start_replay_plays, exp.start_replay_capacity, cfg.seed
         )
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
@@ -89,7 +89,7 @@ class Trainer:
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             ray.init(
-                address=cfg.address or "local",  # never join a stray cluster by accident
+                address=cfg.cluster.address or "local",  # never join a stray cluster by accident
                 include_dashboard=False,
                 logging_level=logging.WARNING,
                 log_to_driver=False,
@@ -117,47 +117,39 @@ class Trainer:
             n_workers,
             env_kind=cfg.env,
             base_seed=base_seed,
-            base_port=cfg.base_port,
+            base_port=cfg.cluster.base_port,
             contexts={"level": cfg.level, "coef": cfg.coef},
-            worker_cpus=cfg.worker_cpus,
-            max_failures=cfg.max_worker_failures,
+            worker_cpus=cfg.cluster.worker_cpus,
+            max_failures=cfg.cluster.max_worker_failures,
             **sampler_placement(cfg, n_workers, base_seed),
         )
-        raw = EnvSpec.from_env_info(self.sampler.env_info())
-        self.env = replace(raw, obs_dim=feature_dim(cfg.features, raw.obs_dim))
+        info = EnvInfo.from_dict(self.sampler.env_info())
+        self.env = EnvSpec.of(info, cfg.learner.features)
         self.spec = agent_spec(
             self.env,
-            cfg.agent_hidden,
-            cfg.last_action_input,
-            cfg.agent_id_input,
-            cfg.features,
-            cfg.head,
-            cfg.ally_action_input,
+            cfg.learner.agent_hidden,
+            cfg.learner.last_action_input,
+            cfg.learner.agent_id_input,
+            cfg.learner.features,
+            cfg.learner.head,
+            info,
         )
         self.learner = QLearner(
             self.env,
             self.spec,
             mixer_for_algorithm(cfg.alg),
-            lr=cfg.lr,
-            gamma=cfg.gamma,
-            grad_clip=cfg.grad_clip,
-            target_update_interval=cfg.target_update_interval,
-            double_q=cfg.double_q,
-            mixer_embed=cfg.mixer_embed,
-            hypernet_hidden=cfg.hypernet_hidden,
-            td_lambda=cfg.td_lambda,
-            eval_ema=cfg.eval_ema,
+            lr=cfg.learner.lr,
+            gamma=cfg.learner.gamma,
+            grad_clip=cfg.learner.grad_clip,
+            target_update_interval=cfg.learner.target_update_interval,
+            double_q=cfg.learner.double_q,
+            mixer_embed=cfg.learner.mixer_embed,
+            hypernet_hidden=cfg.learner.hypernet_hidden,
+            td_lambda=cfg.learner.td_lambda,
         )
-        self.group = task_group(
-            parse_generators(cfg.augment),
-            cfg.features,
-            self.env.obs_dim,
-            self.env.state_dim,
-            self.env.n_actions,
-            self.env.n_agents,
-        )
+        self.group = task_group(parse_generators(cfg.learner.augment), cfg.learner.features, info)
         self.buffer = EpisodeReplayBuffer(
-            cfg.buffer_size,
+            cfg.learner.buffer_size,
             self.env.n_agents,
             self.env.obs_dim,
             self.env.state_dim,
@@ -173,7 +165,7 @@ class Trainer:
         if payload.get("starts") is not None:
             self.starts.load_state_dict(payload["starts"])
         best = self.run_dir / BEST_NAME
-        if self.cfg.keep_best and best.is_file():
+        if self.cfg.eval.keep_best and best.is_file():
             chosen = load_checkpoint(best)
             self.best = (policy_weights(chosen["learner"]), chosen["selection"])
         log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
@@ -199,7 +191,7 @@ class Trainer:
                 self._run_sync()
             else:
                 self._run_async()
-            final = self.evaluate(self.cfg.final_eval_episodes, split="test")
+            final = self.evaluate(self.cfg.eval.final_eval_episodes, split="test")
             self.checkpoint()
             best = self._evaluate_best()
         finally:
@@ -220,15 +212,6 @@ class Trainer:
         elapsed = time.perf_counter() - self.session_start
         return self.counters.episodes < self.cfg.episodes and (limit <= 0 or elapsed < limit)
 
-    def _progress(self) -> float:
-        """Fraction of the budget spent: episodes of ``cfg.episodes`` or this session's
-        minutes of ``cfg.max_minutes``, whichever is further along."""
-        done = self.counters.episodes / self.cfg.episodes
-        limit = self.cfg.max_minutes * 60.0
-        if limit > 0:
-            done = max(done, (time.perf_counter() - self.session_start) / limit)
-        return min(done, 1.0)
-
     def _run_async(self) -> None:
         issued = self.counters.episodes
         while self._more():
@@ -245,8 +228,10 @@ class Trainer:
 
     def _request(self, k: int) -> Request:
         cfg = self.cfg
-        eps = epsilon_at(k, cfg.eps_start, cfg.eps_end, cfg.eps_anneal_episodes)
-        return Request(self.starts.choose(train_seed(cfg.seed, k, cfg.eval_seed)), eps)
+        eps = epsilon_at(
+            k, cfg.learner.eps_start, cfg.learner.eps_end, cfg.learner.eps_anneal_episodes
+        )
+        return Request(self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed)), eps)
 
     def _absorb(self, episodes: list[Episode]) -> None:
         """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
@@ -264,16 +249,10 @@ class Trainer:
         self.seen_restarts = self.sampler.restarts
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
-        if rounds and len(self.buffer) >= cfg.learning_starts:
-            progress = self._progress()
-            self.learner.set_lr(cfg.lr_at(progress))
-            alpha, beta = cfg.priority_alpha, cfg.beta_at(progress)
-            for _ in range(rounds * cfg.updates_per_round):
-                batch = self.buffer.sample(cfg.batch_size, self.np_rng, alpha, beta)
+        if rounds and len(self.buffer) >= cfg.learner.learning_starts:
+            for _ in range(rounds * cfg.learner.updates_per_round):
+                batch = self.buffer.sample(cfg.learner.batch_size, self.np_rng)
                 self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
-                if alpha > 0 and batch.index is not None:
-                    errors = self.learner.episode_errors.numpy()
-                    self.buffer.update_priorities(batch.index.numpy(), errors)
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
         self.recorder.advance(c.episodes - before)
@@ -282,12 +261,12 @@ class Trainer:
         # No periodic evaluation once the budget (episodes or minutes) is spent: the final
         # one follows at once, and a wall-clock budget must not be overrun by a validation.
         if (
-            cfg.eval_every
-            and c.episodes // cfg.eval_every > before // cfg.eval_every
+            cfg.eval.eval_every
+            and c.episodes // cfg.eval.eval_every > before // cfg.eval.eval_every
             and self._more()
         ):
             self.evaluate()
-        if c.episodes // cfg.checkpoint_every > before // cfg.checkpoint_every:
+        if c.episodes // cfg.eval.checkpoint_every > before // cfg.eval.checkpoint_every:
             self.checkpoint()
         if self.hook is not None:
             self.hook(self)
@@ -295,7 +274,7 @@ class Trainer:
     def _rounds_due(self, before: int, after: int) -> int:
         if self.cfg.sync:
             return 1
-        every = self.cfg.train_every
+        every = self.cfg.learner.train_every
         return after // every - before // every
 
     # --- records -----------------------------------------------------------------------
@@ -308,7 +287,10 @@ class Trainer:
         return {
             **asdict(c),
             "epsilon": epsilon_at(
-                c.episodes, self.cfg.eps_start, self.cfg.eps_end, self.cfg.eps_anneal_episodes
+                c.episodes,
+                self.cfg.learner.eps_start,
+                self.cfg.learner.eps_end,
+                self.cfg.learner.eps_anneal_episodes,
             ),
             "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
             "train_return": summarize(recent)["mean_return"] if recent else 0.0,
@@ -323,8 +305,8 @@ class Trainer:
         weights: str = "latest",
         policy: Policy | None = None,
     ) -> dict[str, Any]:
-        """Greedy win rate of ``policy`` (default: the learner's evaluated weights, see
-        ``eval_ema``) on held-out seeds; recorded and returned.
+        """Greedy win rate of ``policy`` (default: the learner's latest weights) on held-out
+        seeds; recorded and returned.
 
         ``split`` picks the seeds (``validation`` or ``test``, see the module docstring);
         with ``keep_best``, a validation result better than every earlier one keeps the
@@ -332,9 +314,9 @@ class Trainer:
         weights again; those already in flight keep the weights they were sent with.
         """
         cfg, c = self.cfg, self.counters
-        n = episodes or cfg.eval_episodes
-        first = cfg.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
-        evaluated = policy or Policy(self.spec, self.learner.policy_weights())
+        n = episodes or cfg.eval.eval_episodes
+        first = cfg.eval.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
+        evaluated = policy or self._policy()
         self.sampler.broadcast(evaluated)
         requests = [Request(first + k, 0.0, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
@@ -346,7 +328,7 @@ class Trainer:
         # On a tie the later weights win: they trained longer, and a 50-episode validation
         # figure cannot tell two equal readings apart anyway.
         better = self.best is None or row["win_rate"] >= self.best[1]["win_rate"]
-        if split == "validation" and cfg.keep_best and better:
+        if split == "validation" and cfg.eval.keep_best and better:
             self.best = (evaluated.weights, row)
             self._save_best()
         return row
@@ -356,7 +338,7 @@ class Trainer:
         (the learner's other state is the current one: resume from checkpoint.pt)."""
         assert self.best is not None
         state = self.learner.state_dict()
-        state[policy_key(state)] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
+        state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
         save_checkpoint(
             self.run_dir / BEST_NAME,
             config=self.cfg.to_dict(),
@@ -374,7 +356,9 @@ class Trainer:
             return None
         weights, chosen = self.best
         best = Policy(self.spec, weights)
-        row = self.evaluate(self.cfg.final_eval_episodes, split="test", weights="best", policy=best)
+        row = self.evaluate(
+            self.cfg.eval.final_eval_episodes, split="test", weights="best", policy=best
+        )
         return {**row, "chosen_at_episodes": chosen["episodes"], "validation": chosen}
 
     def checkpoint(self) -> None:

@@ -232,7 +232,8 @@ def _run_main(argv: list[str]) -> int:
         if not stop.set:
             ports = f"{spec.base_port}..{spec.base_port + spec.count - 1}"
             log.info(
-                "serving %d × %d arenas on %s ports %s; logs in %s; state in %s",
+                "serving %d arenas (%d servers × %d) on %s ports %s; logs in %s; state in %s",
+                spec.count * spec.arenas,
                 spec.count,
                 spec.arenas,
                 spec.host,

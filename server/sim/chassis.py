@@ -1,6 +1,6 @@
 """Mecanum chassis model: commanded body velocity → actual body velocity, per physics step.
 
-This is the sim-to-real part of the robot (``shared/spec/reference.md``, "Chassis dynamics"):
+This is the sim-to-real part of the robot (``docs/reference.md``, "Chassis model"):
 the rigid body in PyBullet is driven by the velocity this model produces, not by the raw
 command, so that robots accelerate, brake and undershoot like the released build's wheels.
 It runs for all N robots at once in one numba kernel, because the arena calls it every physics
@@ -84,15 +84,20 @@ SLIP_EPS = 1e-9
 _MU, _KP, _KI, _KD, _VK1, _M, _WI, _VX_DT, _VY_DT, _VW_DT, _SCALE = range(11)
 N_PARAMS = 11
 
-# Columns of the per-robot state row: parameters, delays in steps, stopped flag, wheel speeds
-# (rad/s), previous errors, error sums, then three delay lines (released vx, vy, ω) of equal
-# length.
-_S_DELAY = N_PARAMS
-_S_STOPPED = _S_DELAY + 3
-_S_W = _S_STOPPED + 1
-_S_E = _S_W + 4
-_S_I = _S_E + 4
-_S_BUF = _S_I + 4
+S_DELAY = N_PARAMS
+"""First of the three columns of :attr:`ChassisState.rows` holding each axis's delay in
+physics steps (released vx, vy, ω). The columns before it are the parameters, in
+:class:`ChassisParams` field order."""
+S_STOPPED = S_DELAY + 3
+"""Column of the stopped flag (1.0: destroyed, the command is ignored until ``reset``)."""
+S_W = S_STOPPED + 1
+"""First of four columns of wheel speeds (rad/s, released wheel order)."""
+S_E = S_W + 4
+"""First of four columns of the previous sub-step's rim-speed errors."""
+S_I = S_E + 4
+"""First of four columns of the error sums (the PID's integral)."""
+S_BUF = S_I + 4
+"""First column of the three delay lines (released vx, vy, ω), ``length`` columns each."""
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,25 @@ class ChassisParams:
     def as_row(self) -> np.ndarray:
         """The parameters as the float64 row the kernel reads (columns in field order)."""
         return np.array(astuple(self), dtype=np.float64)
+
+
+@dataclass
+class ChassisState:
+    """The wheel model's state of N robots, in the form the kernels read and write.
+
+    :class:`Chassis` owns one and advances it; kernels that fuse the chassis with other
+    per-step work (``server/sim/stepper.py``) take ``rows`` and ``head`` from it and give
+    the head back when they are done.
+    """
+
+    rows: np.ndarray
+    """``(N, S_BUF + 3·length)`` float64, one row per robot, updated in place: parameters,
+    delays, stopped flag, wheel speeds, errors, error sums and delay lines at the ``S_*``
+    columns."""
+    length: int
+    """Length of each delay line: the longest delay in physics steps, plus one."""
+    head: int = 0
+    """Delay-line slot the last physics step's command was written to."""
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -186,14 +210,15 @@ def step_kernel(
 ) -> None:
     """Advance every robot's wheels by one physics step; write the mean body velocity to out.
 
-    ``state`` (see the ``_S_*`` columns) holds parameters, wheel state and the delay lines and
-    is updated in place: one array argument keeps numba's per-call dispatch cost low.
+    ``state`` (:attr:`ChassisState.rows`, see the ``S_*`` columns) holds parameters, wheel
+    state and the delay lines and is updated in place: one array argument keeps numba's
+    per-call dispatch cost low.
     """
-    length = (state.shape[1] - _S_BUF) // 3
+    length = (state.shape[1] - S_BUF) // 3
     slip_eps = SLIP_EPS * 4.0 / WHEEL_RADIUS  # the same threshold on sums of wheel speeds
     for i in range(cmd.shape[0]):
         s = state[i]
-        if s[_S_STOPPED] != 0.0:
+        if s[S_STOPPED] != 0.0:
             out[i, 0] = 0.0
             out[i, 1] = 0.0
             out[i, 2] = 0.0
@@ -201,12 +226,12 @@ def step_kernel(
         scale = s[_SCALE]
         # Project frame → released frame (vx = -v_left, vy = v_forward, ω = -omega_ccw),
         # then through each axis's delay line.
-        s[_S_BUF + head] = -cmd[i, 1] * scale
-        s[_S_BUF + length + head] = cmd[i, 0] * scale
-        s[_S_BUF + 2 * length + head] = -cmd[i, 2] * scale
-        vx = s[_S_BUF + (head - int(s[_S_DELAY])) % length]
-        vy = s[_S_BUF + length + (head - int(s[_S_DELAY + 1])) % length]
-        wz = s[_S_BUF + 2 * length + (head - int(s[_S_DELAY + 2])) % length]
+        s[S_BUF + head] = -cmd[i, 1] * scale
+        s[S_BUF + length + head] = cmd[i, 0] * scale
+        s[S_BUF + 2 * length + head] = -cmd[i, 2] * scale
+        vx = s[S_BUF + (head - int(s[S_DELAY])) % length]
+        vy = s[S_BUF + length + (head - int(s[S_DELAY + 1])) % length]
+        wz = s[S_BUF + 2 * length + (head - int(s[S_DELAY + 2])) % length]
         t0 = -vx - vy - HALF_TRACK_PLUS_BASE * wz
         t1 = vx - vy - HALF_TRACK_PLUS_BASE * wz
         t2 = vx + vy - HALF_TRACK_PLUS_BASE * wz
@@ -221,9 +246,9 @@ def step_kernel(
         gf_both = f_s * 1.8 * WHEEL_RADIUS * dt_i  # F_r + F_s with F_r = 0.8·F_s
         gf_slide = f_s * WHEEL_RADIUS * dt_i
 
-        w0, w1, w2, w3 = s[_S_W], s[_S_W + 1], s[_S_W + 2], s[_S_W + 3]
-        e0, e1, e2, e3 = s[_S_E], s[_S_E + 1], s[_S_E + 2], s[_S_E + 3]
-        a0, a1, a2, a3 = s[_S_I], s[_S_I + 1], s[_S_I + 2], s[_S_I + 3]
+        w0, w1, w2, w3 = s[S_W], s[S_W + 1], s[S_W + 2], s[S_W + 3]
+        e0, e1, e2, e3 = s[S_E], s[S_E + 1], s[S_E + 2], s[S_E + 3]
+        a0, a1, a2, a3 = s[S_I], s[S_I + 1], s[S_I + 2], s[S_I + 3]
         m0 = m1 = m2 = m3 = 0.0
         for _ in range(n_sub):
             # Slip signs from the wheel model's current body velocity (module docstring):
@@ -249,9 +274,9 @@ def step_kernel(
             m1 += w1
             m2 += w2
             m3 += w3
-        s[_S_W], s[_S_W + 1], s[_S_W + 2], s[_S_W + 3] = w0, w1, w2, w3
-        s[_S_E], s[_S_E + 1], s[_S_E + 2], s[_S_E + 3] = e0, e1, e2, e3
-        s[_S_I], s[_S_I + 1], s[_S_I + 2], s[_S_I + 3] = a0, a1, a2, a3
+        s[S_W], s[S_W + 1], s[S_W + 2], s[S_W + 3] = w0, w1, w2, w3
+        s[S_E], s[S_E + 1], s[S_E + 2], s[S_E + 3] = e0, e1, e2, e3
+        s[S_I], s[S_I + 1], s[S_I + 2], s[S_I + 3] = a0, a1, a2, a3
 
         # Mean rim speeds → forward kinematics → project frame. The pairings make an axis that
         # is not commanded come out exactly 0 (wheels that must cancel are exact negatives or
@@ -264,6 +289,14 @@ def step_kernel(
         out[i, 0] = ((m2 - m0) + (m3 - m1)) * 0.25 + 0.0
         out[i, 1] = -(((m1 - m0) + (m2 - m3)) * 0.25) + 0.0
         out[i, 2] = ((m0 + m2) + (m1 + m3)) / (4.0 * HALF_TRACK_PLUS_BASE) + 0.0
+
+
+@numba.njit(cache=True)
+def stop_row(rows: np.ndarray, i: int) -> None:
+    """Freeze robot ``i`` of ``rows`` (:attr:`ChassisState.rows`): zero its wheels, PID state
+    and delay lines and set its stopped flag."""
+    rows[i, S_STOPPED:] = 0.0
+    rows[i, S_STOPPED] = 1.0
 
 
 class Chassis:
@@ -282,11 +315,13 @@ class Chassis:
             raise ValueError(f"physics_dt {physics_dt} is not a multiple of sub_dt {sub_dt}")
         self.n_robots = n_robots
         self.physics_dt = float(physics_dt)
+        """Length of a physics step (s)."""
         self.sub_dt = float(sub_dt)
-        self._n_sub = int(n_sub)
-        self._state = np.zeros((n_robots, _S_BUF + 3))
-        self._len = 1
-        self._head = 0
+        """Length of a wheel-model sub-step (s)."""
+        self.n_sub = int(n_sub)
+        """Sub-steps per physics step."""
+        self.state = ChassisState(np.zeros((n_robots, S_BUF + 3)), 1)
+        """Parameters, wheel state and delay lines of every robot."""
         self.reset([ChassisParams()] * n_robots)
 
     def delay_steps(self, seconds: float) -> int:
@@ -305,12 +340,12 @@ class Chassis:
                 raise ValueError(f"robot {i}: need wheel_i > 0, friction_coeff >= 0, m >= 0")
             delays[i] = [self.delay_steps(d) for d in (p.vx_dt, p.vy_dt, p.vw_dt)]
         # Delay lines just long enough for the longest delay; zeros = at rest before the start.
-        self._len = int(delays.max()) + 1
-        self._state = np.zeros((self.n_robots, _S_BUF + 3 * self._len))
+        length = int(delays.max()) + 1
+        rows = np.zeros((self.n_robots, S_BUF + 3 * length))
         for i, p in enumerate(params):
-            self._state[i, :N_PARAMS] = p.as_row()
-        self._state[:, _S_DELAY : _S_DELAY + 3] = delays
-        self._head = 0
+            rows[i, :N_PARAMS] = p.as_row()
+        rows[:, S_DELAY : S_DELAY + 3] = delays
+        self.state = ChassisState(rows, length)
 
     def step(self, cmd: np.ndarray) -> np.ndarray:
         """Advance one physics step under ``cmd`` and return the body velocity to apply.
@@ -329,15 +364,15 @@ class Chassis:
     def tick(self) -> tuple[np.ndarray, int, int, float]:
         """Advance the delay lines' head; return ``(state, head, n_sub, sub_dt)`` for one
         :func:`step_kernel` call. For fused per-step kernels that call it from numba."""
-        self._head = (self._head + 1) % self._len
-        return self._state, self._head, self._n_sub, self.sub_dt
+        state = self.state
+        state.head = (state.head + 1) % state.length
+        return state.rows, state.head, self.n_sub, self.sub_dt
 
     def stop(self, idx: int) -> None:
         """Freeze a destroyed robot: zero its wheels and ignore its command until ``reset``."""
-        self._state[idx, _S_STOPPED:] = 0.0  # wheels, PID state and delay line
-        self._state[idx, _S_STOPPED] = 1.0
+        stop_row(self.state.rows, idx)
 
     @property
     def rim_speeds(self) -> np.ndarray:
         """Copy of the current wheel rim speeds (N, 4) in m/s, released wheel order and signs."""
-        return self._state[:, _S_W : _S_W + 4] * WHEEL_RADIUS
+        return self.state.rows[:, S_W : S_W + 4] * WHEEL_RADIUS

@@ -2,7 +2,7 @@
 
 Every other module reads the field from here, so the arena is described exactly once.
 Frame: x along the long side (0 → 8.08 m), y along the short side (0 → 4.48 m), z up, yaw
-counter-clockwise from +x. Figures are from ``shared/spec/reference.md``.
+counter-clockwise from +x. Figures are from ``docs/reference.md``.
 """
 
 from __future__ import annotations

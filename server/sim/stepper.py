@@ -20,9 +20,9 @@ arena's zones option, whose effects change commands and targets between steps. T
 are the same functions the stand-alone ``Chassis.step``, ``World.step`` and
 ``Referee.physics_step`` use, so all paths give identical results.
 
-numba's on-disk cache keys a kernel on its own file only: after editing chassis.py, world.py,
-shots.py or task/control.py, delete ``server/sim/__pycache__/stepper.*.nb[ic]`` or these
-kernels keep the old code.
+These kernels compile in the functions of chassis.py, world.py, shots.py and task/control.py;
+numba's cache is keyed on all of those sources (:mod:`.kernel_cache`), so editing any of them
+recompiles these too.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import pybullet as pb
 from numba.core import types
 from numba.extending import intrinsic
 
-from neuronsmae.server.sim.chassis import _S_STOPPED, Chassis, step_kernel
+from neuronsmae.server.sim.chassis import Chassis, step_kernel, stop_row
 from neuronsmae.server.sim.referee import _NO_DRAWS, Referee, StepTally
 from neuronsmae.server.sim.shots import fire
 from neuronsmae.server.sim.world import (
@@ -224,8 +224,7 @@ def _finish(readout, table, draws, sub_dt) -> int:
     if destroyed:
         for i in range(n):
             if not alive[i]:
-                state[i, _S_STOPPED:] = 0.0
-                state[i, _S_STOPPED] = 1.0
+                stop_row(state, i)
                 cmd[i, 0], cmd[i, 1], cmd[i, 2] = 0.0, 0.0, 0.0
     t = ctl[C_T] + 1
     ctl[C_T] = t
@@ -307,13 +306,14 @@ class Stepper:
         """
         world, ref, chassis = self.world, self.referee, self.chassis
         ctl, vel, table = self._ctl, self._vel, self._table
-        ctl[C_HEAD], ctl[C_LEN], ctl[C_NSUB] = chassis._head, chassis._len, chassis._n_sub
+        wheels = chassis.state
+        ctl[C_HEAD], ctl[C_LEN], ctl[C_NSUB] = wheels.head, wheels.length, chassis.n_sub
         ctl[C_NSTATIC], ctl[C_T], ctl[C_LIMIT] = ref.n_static, t, limit
         ctl[C_NBLUE], ctl[C_K], ctl[C_PERIOD], ctl[C_EVERY] = ref.n_blue, 0, period, every
         # Held here until the decision is over: the table points into these arrays.
         bound = (
             poses, ref.alive, self._fix, ref.fl, ref.it, targets, ref.boxes, tally.damage,
-            tally.kills, chassis._state, cmd, vel, orders.intent, orders.pts, orders.off, ctl,
+            tally.kills, wheels.rows, cmd, vel, orders.intent, orders.pts, orders.off, ctl,
         )  # fmt: skip
         _bind(table, *bound)
         sub_dt = chassis.sub_dt
@@ -345,7 +345,7 @@ class Stepper:
             if code & ENDED:
                 break
         del bound
-        chassis._head = int(ctl[C_HEAD])
+        wheels.head = int(ctl[C_HEAD])
         return int(ctl[C_T])
 
 

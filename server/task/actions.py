@@ -14,10 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.env_info import V_MAX, W_MAX
 from neuronsmae.protocol.errors import InvalidActionError
 
-V_MAX = 2.0
-W_MAX = 1.75
 DISCRETE_SPEED = 1.0
 DISCRETE_MOVES = ("stop", "forward", "back", "left", "right")
 DISCRETE_VEL = np.array(

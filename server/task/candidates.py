@@ -1,7 +1,7 @@
 """Candidate shooting points around an enemy: the abstract action space's targets.
 
 The abstract action picks an enemy and one of ``k`` points to drive to. Following the
-released build (``shared/spec/reference.md``, "Candidate points"): sample ``n_samples``
+released build (``docs/reference.md``, "Candidate points"): sample ``n_samples``
 points evenly on a circle of ``radius`` (2.5 m, the best shooting distance) around the
 enemy; drop those outside ``x ∈ [0.2, 7.8], y ∈ [0.2, 4.0]``, inside an obstacle grown by
 the robot's half-size (0.30 m), inside the ±0.6 m square around another robot, or without
@@ -38,9 +38,6 @@ import numpy as np
 
 from neuronsmae.server.sim.field import SPAWN_OBSTACLE_MARGIN
 from neuronsmae.server.task.geometry import SIGHT_MIN_HEIGHT, point_in_grown_box, slab_clip
-
-# numba's on-disk cache keys a kernel on its own file only: after editing geometry.py,
-# delete server/task/__pycache__/candidates.*.nb[ic] or these kernels keep the old code.
 
 RADIUS = 2.5
 """Circle radius (m): the best shooting distance (hit factor 1 below 3 m)."""

@@ -1,11 +1,11 @@
 """Grid A* path planner and path follower behind the abstract action space.
 
-The released planner (reference.md) is a 4 cm grid, obstacles grown by 0.30 m, other
-robots blocked ±0.6 m, 4-connected A*. Taken literally it fails whenever a robot stands
-inside a grown margin, which happens all the time, so here the margins (walls included) and
-the robot squares are *soft*: passable at a high, depth-graded extra cost. Only cells
-touching a raw obstacle, and the outside, are impassable; an impassable start or goal is
-moved to the nearest passable cell. So a command exists whenever a real path does.
+The released planner (``docs/reference.md``, "Planner") is a 4 cm grid, obstacles grown by
+0.30 m, other robots blocked ±0.6 m, 4-connected A*. Taken literally it fails whenever a
+robot stands inside a grown margin, which happens all the time, so here the margins (walls
+included) and the robot squares are *soft*: passable at a high, depth-graded extra cost.
+Only cells touching a raw obstacle, and the outside, are impassable; an impassable start or
+goal is moved to the nearest passable cell. So a command exists whenever a real path does.
 
 Speed (four robots replan every decision, >400 decisions/s): the static grid and its ALT
 landmark tables are built once and shared; per-query bookkeeping is generation-stamped, so

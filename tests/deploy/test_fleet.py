@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from neuronsmae.protocol.launch import ServerCommand
 from neuronsmae.server.serving.fleet import main, status
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec, FleetStartError, Member
 
@@ -90,8 +91,12 @@ def test_dead_server_restarts_later_each_time(
     """Backoff without real servers: a 'server' that exits at once is restarted 0.5 s, then
     1 s, then 2 s after each death."""
     fleet = Fleet(FleetSpec(base_port=free_ports()), tmp_path / "logs", tmp_path / "s.json")
-    crash = [sys.executable, "-c", "import sys; sys.exit(3)"]
-    monkeypatch.setattr(fleet, "command", lambda member: crash)
+
+    class Crash(ServerCommand):  # started the same way as a server, but exits at once
+        def argv(self) -> list[str]:
+            return [sys.executable, "-c", "import sys; sys.exit(3)"]
+
+    monkeypatch.setattr(fleet, "command", lambda member: Crash(member.port))
     clock = [1000.0]
     monkeypatch.setattr("neuronsmae.server.serving.supervisor.time.monotonic", lambda: clock[0])
     member: Member = fleet.members[0]
@@ -119,7 +124,7 @@ def test_status_of_nothing_is_down_and_exits_1(
                  "--state-file", str(tmp_path / "absent.json")])  # fmt: skip
     rows = json.loads(capsys.readouterr().out)
     assert code == 1 and [r["state"] for r in rows] == ["down", "down"]
-    assert "nothing listens" in rows[0]["error"]
+    assert "no server listens" in rows[0]["error"]
 
 
 def test_bad_count_is_a_usage_error() -> None:

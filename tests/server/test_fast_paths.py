@@ -79,7 +79,7 @@ def test_fused_decision_loop_matches_the_per_step_path(options: dict) -> None:
             done = False
             for a, out in zip(arenas, trace, strict=True):
                 obs, rew, done, info = a.step(acts)
-                out.append(_bits([obs, rew, done, info, a.poses, a.chassis._state]))
+                out.append(_bits([obs, rew, done, info, a.poses, a.chassis.state.rows]))
             if done:
                 break
     for a in arenas:

@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 
 from neuronsmae.trainers.agent import (
     RNNAgent,
-    agent_input_dim,
     build_inputs,
     epsilon_at,
     epsilon_greedy,
@@ -66,23 +65,6 @@ def test_inputs_and_network_shapes() -> None:
     agent = RNNAgent(47, 8, 16)
     q, h = agent(x.permute(0, 2, 1, 3).reshape(8, 7, 47), agent.initial_hidden(8))
     assert q.shape == (8, 7, 8) and h.shape == (1, 8, 16)
-
-
-def test_ally_actions_are_each_mates_last_action_in_index_order() -> None:
-    obs = torch.zeros(5, 3, 4)  # [B, n_agents, obs_dim]
-    last = torch.tensor([[2, -1, 0]]).expand(5, 3)
-    x = build_inputs(obs, last, 3, last_action=True, agent_id=True, ally_actions=True)
-    width = agent_input_dim(4, 3, 3, last_action=True, agent_id=True, ally_actions=True)
-    assert x.shape == (5, 3, width) and width == 4 + 3 + 2 * 3 + 3
-    onehot = {2: [0, 0, 1], -1: [0, 0, 0], 0: [1, 0, 0]}
-    mates = {0: (-1, 0), 1: (2, 0), 2: (2, -1)}  # agent -> its mates' last actions
-    for i, own in enumerate((2, -1, 0)):
-        row = x[0, i].tolist()
-        assert row[4:7] == onehot[own]
-        assert row[7:13] == onehot[mates[i][0]] + onehot[mates[i][1]]
-        assert row[13:] == [float(i == j) for j in range(3)]
-    plain = build_inputs(obs, last, 3, last_action=True, agent_id=True)
-    assert torch.equal(x[..., :7], plain[..., :7]) and torch.equal(x[..., 13:], plain[..., 7:])
 
 
 def test_epsilon_schedule() -> None:

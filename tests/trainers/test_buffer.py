@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer, IncompleteEpisodeError
 
@@ -73,32 +74,11 @@ def test_rejects_incomplete_episodes(broken: str) -> None:
     assert len(buf) == 0
 
 
-def test_uniform_sampling_has_no_weights_and_keeps_its_draws() -> None:
+def test_uniform_sampling_draws_with_the_generator_given() -> None:
     buf = _buffer(4)
     rng = np.random.default_rng(3)
     for _ in range(4):
         buf.add(make_episode(LIMIT, rng))
     b = buf.sample(3, np.random.default_rng(9))
     expected = np.random.default_rng(9).choice(4, size=3, replace=False)
-    assert b.weights is None and b.index is not None
-    assert b.index.tolist() == expected.tolist()  # alpha = 0 draws exactly as before
-
-
-def test_prioritised_sampling_follows_priorities_and_weights_undo_it() -> None:
-    buf = _buffer(3)
-    rng = np.random.default_rng(4)
-    for _ in range(3):
-        buf.add(make_episode(2, rng))
-    assert buf.priorities[:3].tolist() == [1.0, 1.0, 1.0]  # new episodes: the max seen
-    buf.update_priorities(np.array([0, 1, 2]), np.array([1.0, 3.0, 0.0]))
-    p = (buf.priorities[:3] ** 0.5) / (buf.priorities[:3] ** 0.5).sum()
-    b = buf.sample(20_000, np.random.default_rng(5), alpha=0.5, beta=0.7)
-    assert b.index is not None and b.weights is not None
-    freq = np.bincount(b.index.numpy(), minlength=3) / 20_000
-    assert freq == pytest.approx(p, abs=0.01)
-    assert freq[2] > 0  # the floor keeps a fitted episode reachable
-    w = (3 * p) ** -0.7
-    by_slot = {int(i): float(x) for i, x in zip(b.index, b.weights, strict=True)}
-    assert [by_slot[i] for i in range(3)] == pytest.approx((w / w.max()).tolist(), rel=1e-5)
-    buf.add(make_episode(2, rng))  # overwrites slot 0 with the largest priority seen
-    assert buf.priorities[0] == pytest.approx(3.0 + 1e-3)
+    assert torch.equal(b.obs, torch.from_numpy(buf.obs[expected, : b.obs.shape[1]]))

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 from pathlib import Path
 
 import pytest
 
-from neuronsmae.trainers.cli import build_parser, config_from_args
+from neuronsmae.trainers import config
+from neuronsmae.trainers.cli import build_parser, config_from_args, main
 from neuronsmae.trainers.config import (
+    GROUPS,
+    KEYS,
     ConfigError,
+    LearnerConfig,
     TrainConfig,
     field_docs,
     make_config,
@@ -19,47 +25,70 @@ from neuronsmae.trainers.config import (
 )
 
 
+def test_the_configuration_is_grouped_and_small() -> None:
+    top = [f.name for f in dataclasses.fields(TrainConfig)]
+    assert len(top) < 35 and set(GROUPS) <= set(top)
+    sizes = {name: len(dataclasses.fields(cls)) for name, cls in GROUPS.items()}
+    assert sizes == {"learner": 22, "eval": 6, "cluster": 8, "experimental": 3}
+    assert len(KEYS) == len(top) - len(GROUPS) + sum(sizes.values())
+
+
 def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
     cfg = make_config(preset("paper"))
-    assert (cfg.lr, cfg.gamma, cfg.eps_start, cfg.eps_end) == (5e-4, 0.99, 0.2, 0.05)
-    assert (cfg.grad_clip, cfg.agent_hidden, cfg.mixer_embed) == (10.0, 128, 32)
-    assert (cfg.target_update_interval, cfg.td_lambda, cfg.features) == (5, 0.0, "raw")
-    assert cfg.augment == "none" and make_config().augment == "enemies,field,allies"
+    learner = cfg.learner
+    assert (learner.lr, learner.gamma, learner.eps_start, learner.eps_end) == (
+        5e-4,
+        0.99,
+        0.2,
+        0.05,
+    )
+    assert (learner.grad_clip, learner.agent_hidden, learner.mixer_embed) == (10.0, 128, 32)
+    assert (learner.target_update_interval, learner.td_lambda, learner.features) == (5, 0.0, "raw")
+    assert (learner.head, learner.augment, learner.updates_per_round) == ("flat", "none", 1)
+    assert (cfg.sync, cfg.max_minutes, cfg.episodes) == (True, 0.0, 30_000)
+    assert make_config().learner.augment == "enemies,field,allies"
     args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
-    assert config_from_args(args).lr == 0.01  # --set still wins over the preset
+    assert config_from_args(args).learner.lr == 0.01  # --set still wins over the preset
     with pytest.raises(ConfigError, match="valid: paper"):
         preset("fast")
 
 
-def test_every_field_has_a_docstring() -> None:
+def test_every_key_has_a_docstring() -> None:
     docs = field_docs()
-    assert set(docs) == set(TrainConfig().to_dict())
+    assert list(docs) == list(KEYS)
     assert all(doc.strip() for doc in docs.values())
+    assert "learner.lr" in docs and "experimental.start_replay" in docs
 
 
-def test_set_overrides_are_typed() -> None:
+def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
     cfg = make_config(
-        parse_overrides(["lr=1e-3", "batch_size=8", "double_q=false", "alg=qmix", "episodes=1e3"])
+        parse_overrides(
+            ["learner.lr=1e-3", "batch_size=8", "double_q=false", "alg=qmix", "episodes=1e3"]
+        )
     )
-    assert cfg.lr == 1e-3 and cfg.batch_size == 8 and cfg.double_q is False
-    assert cfg.alg == "qmix" and cfg.episodes == 1000
-    assert make_config(parse_overrides(["features=exposure"])).head == "points"
+    assert cfg.learner.lr == 1e-3 and cfg.learner.batch_size == 8
+    assert cfg.learner.double_q is False and cfg.alg == "qmix" and cfg.episodes == 1000
+    assert parse_overrides(["eval_every=3", "cluster.router=tcp/h:7447"]) == {
+        "eval.eval_every": "3",
+        "cluster.router": "tcp/h:7447",
+    }
 
 
 @pytest.mark.parametrize(
     ("items", "message"),
     [
-        (["learning_rate=1"], "unknown config key.*'learning_rate'.*valid:"),
+        (["learning_rate=1"], "unknown config key 'learning_rate'.*valid: alg, level"),
         (["lr"], "key=value"),
-        (["batch_size=big"], "batch_size expects int"),
+        (["batch_size=big"], "learner.batch_size expects int"),
         (["double_q=maybe"], "expects a bool"),
         (["alg=mappo"], "valid: iql, qmix, vdn"),
         (["level=expert"], "valid: easy, middle, hard"),
         (["batch_size=0"], "batch_size must be"),
-        (["features=polar"], "valid: exposure, raw, relative, sight"),
-        (["features=raw"], "head='points' needs features in .*'relative', 'exposure'"),
-        (["priority_alpha=-1"], "priority_alpha must be ≥ 0"),
-        (["priority_beta=1.5"], "priority_beta in \\[0, 1\\]"),
+        (["features=polar"], "valid: raw, relative"),
+        (["features=raw"], "head='points' needs features in .*'relative'"),
+        (["learner=3"], "a group: set learner.<name>"),
+        (["eval.lr=1"], "unknown config key 'eval.lr'"),
+        (["servers=cloud"], "valid: local, actors"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
@@ -70,18 +99,41 @@ def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
 def test_unknown_key_suggests_the_close_one() -> None:
     with pytest.raises(ConfigError, match="did you mean 'batch_size'"):
         make_config({"batchsize": 3})
+    with pytest.raises(ConfigError, match=re.escape("did you mean 'learner.batch_size'")):
+        make_config({"learner.batchsize": 3})
 
 
-def test_files_toml_and_json(tmp_path: Path) -> None:
+def test_a_bare_name_in_two_groups_is_ambiguous(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(config.KEYS, "eval.lr", float)
+    with pytest.raises(ConfigError, match=re.escape("ambiguous: use one of ['learner.lr'")):
+        parse_overrides(["lr=0.1"])
+    assert parse_overrides(["learner.lr=0.1"]) == {"learner.lr": "0.1"}
+
+
+def test_files_with_tables_dotted_and_bare_keys(tmp_path: Path) -> None:
     toml = tmp_path / "c.toml"
-    toml.write_text('[train]\nalg = "iql"\nlr = 0.001\nworkers = 3\n')
-    assert read_config_file(toml) == {"alg": "iql", "lr": 0.001, "workers": 3}
+    toml.write_text('alg = "iql"\nworkers = 3\n[learner]\nlr = 0.001\n[eval]\neval_every = 7\n')
+    expected = {"alg": "iql", "workers": 3, "learner.lr": 0.001, "eval.eval_every": 7}
+    assert read_config_file(toml) == expected
+    wrapped = tmp_path / "w.toml"
+    wrapped.write_text('[train]\nalg = "iql"\nlr = 0.001\n')
+    assert read_config_file(wrapped) == {"alg": "iql", "learner.lr": 0.001}
     js = tmp_path / "c.json"
+    js.write_text(json.dumps({"learner.gamma": 0.9, "cluster": {"worker_cpus": 1}}))
+    assert make_config(read_config_file(js)).learner.gamma == 0.9
     js.write_text(json.dumps({"gamma": 0.9, "typo_key": 1}))
     with pytest.raises(ConfigError, match="typo_key"):
         read_config_file(js)
     with pytest.raises(ConfigError, match=r"\.toml or \.json"):
         read_config_file(tmp_path / "c.yaml")
+
+
+def test_the_saved_config_is_nested_and_reads_back(tmp_path: Path) -> None:
+    cfg = make_config({"alg": "qmix", "lr": 2e-3, "start_replay": 0.5, "address": "auto"})
+    saved = json.loads(json.dumps(cfg.to_dict()))
+    assert saved["learner"]["lr"] == 2e-3 and saved["experimental"]["start_replay"] == 0.5
+    assert saved["cluster"]["address"] == "auto" and "lr" not in saved
+    assert make_config(saved) == cfg
 
 
 def test_cli_layers_flags_win_over_set_and_file(tmp_path: Path) -> None:
@@ -91,30 +143,40 @@ def test_cli_layers_flags_win_over_set_and_file(tmp_path: Path) -> None:
         ["--config", str(f), "--set", "lr=0.003", "--alg", "qmix", "--level", "hard"]
     )
     cfg = config_from_args(args)
-    assert (cfg.alg, cfg.level, cfg.lr, cfg.seed) == ("qmix", "hard", 0.003, 4)
+    assert (cfg.alg, cfg.level, cfg.learner.lr, cfg.seed) == ("qmix", "hard", 0.003, 4)
     assert str(cfg.run_dir) == "runs/qmix_hard_s4"
+    address = config_from_args(build_parser().parse_args(["--address", "auto"]))
+    assert address.cluster.address == "auto"
 
 
-def test_resume_without_a_run_is_an_error(tmp_path: Path) -> None:
+def test_resume_reads_the_saved_config(tmp_path: Path) -> None:
     args = build_parser().parse_args(["--resume", "--out", str(tmp_path / "none")])
     with pytest.raises(ConfigError, match="--resume"):
         config_from_args(args)
+    saved = make_config({"out": str(tmp_path), "agent_hidden": 16, "alg": "iql"})
+    (tmp_path / "config.json").write_text(json.dumps(saved.to_dict()))
+    args = build_parser().parse_args(["--resume", "--out", str(tmp_path), "--episodes", "9"])
+    resumed = config_from_args(args)
+    assert resumed.learner.agent_hidden == 16 and resumed.alg == "iql"
+    assert resumed.episodes == 9
 
 
-def test_learning_rate_schedule_is_linear_over_the_budget_and_off_by_default() -> None:
-    assert TrainConfig(lr=1e-3).lr_at(0.7) == 1e-3
-    cfg = TrainConfig(lr=1e-3, lr_final=1e-4)
-    assert cfg.lr_at(0.0) == pytest.approx(1e-3)
-    assert cfg.lr_at(0.5) == pytest.approx(5.5e-4)
-    assert cfg.lr_at(1.0) == pytest.approx(1e-4)
-    assert cfg.lr_at(3.0) == pytest.approx(1e-4)
+def test_help_config_lists_every_key_by_group(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--help-config"]) == 0
+    out = capsys.readouterr().out
+    assert out.index("[top level]") < out.index("[learner]") < out.index("[experimental]")
+    for key in KEYS:
+        assert f"\n{key} = " in out, key
+    assert "learner.lr = 0.0005\n    Adam learning rate" in out
+
+
+def test_values_out_of_range_are_errors() -> None:
     with pytest.raises(ConfigError, match="lr must be > 0"):
-        TrainConfig(lr=0.0)
-
-
-def test_importance_weight_exponent_rises_to_one_over_the_budget() -> None:
-    cfg = TrainConfig(priority_alpha=0.6, priority_beta=0.4)
-    assert [cfg.beta_at(p) for p in (0.0, 0.5, 1.0, 2.0)] == pytest.approx([0.4, 0.7, 1.0, 1.0])
+        LearnerConfig(lr=0.0)
+    with pytest.raises(ConfigError, match="gamma must lie in"):
+        make_config({"gamma": 1.5})
+    with pytest.raises(ConfigError, match="learner must be a LearnerConfig"):
+        TrainConfig(learner={"lr": 1.0})  # type: ignore[arg-type]
 
 
 def test_the_readme_main_job_is_the_target_run(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import fields, replace
-
 import numpy as np
 import pytest
 import torch
 
-from neuronsmae.trainers.buffer import Batch, EpisodeReplayBuffer
+from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec, lambda_returns
 
 from .conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode
@@ -99,70 +97,3 @@ def test_lambda_returns_by_hand() -> None:
     g1 = 2 + g * ((1 - lam) * 20 + lam * g2)
     g0 = 1 + g * ((1 - lam) * 10 + lam * g1)
     assert lambda_returns(r, d, v, g, lam).flatten().tolist() == pytest.approx([g0, g1, g2])
-
-
-def test_weight_average_follows_every_update_and_is_the_evaluated_policy() -> None:
-    rng = np.random.default_rng(3)
-    buf = EpisodeReplayBuffer(8, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
-    for _ in range(8):
-        buf.add(make_episode(LIMIT, rng, dead_from=None))
-    torch.manual_seed(0)
-    learner = _learner("vdn", eval_ema=0.25)
-    average = learner.policy_weights()
-    for _ in range(3):
-        learner.train(buf.sample(4, rng))
-        latest = learner.acting_weights()
-        average = {k: v + 0.25 * (latest[k] - v) for k, v in average.items()}
-        got = learner.policy_weights()
-        for k, v in average.items():
-            np.testing.assert_allclose(got[k], v, rtol=1e-5, atol=1e-6)
-    assert not np.array_equal(got["fc1.weight"], latest["fc1.weight"])
-    resumed = _learner("vdn", eval_ema=0.25)
-    resumed.load_state_dict(learner.state_dict())
-    for k, v in resumed.policy_weights().items():
-        assert np.array_equal(v, got[k])
-    off = _learner("vdn")
-    assert off.average_agent is None and "average_agent" not in off.state_dict()
-    for k, v in off.policy_weights().items():
-        assert np.array_equal(v, off.acting_weights()[k])
-
-
-_FIELDS = [f.name for f in fields(Batch) if f.name not in ("index", "weights")]
-"""The per-episode tensors of a batch."""
-
-
-def _masked_steps(batch: Batch, mixer: str) -> torch.Tensor:
-    """Per episode, the TD terms the loss averages over: steps, or live agent-steps (IQL)."""
-    if mixer == "none":
-        return (batch.filled.unsqueeze(-1) * batch.alive[:, :-1]).sum((1, 2))
-    return batch.filled.sum(1)
-
-
-@pytest.mark.parametrize("mixer", ["none", "vdn", "qmix"])
-def test_importance_weights_scale_each_episode_and_errors_are_per_episode(mixer: str) -> None:
-    rng = np.random.default_rng(5)
-    buf = EpisodeReplayBuffer(2, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
-    buf.add(make_episode(LIMIT, rng, dead_from=2))
-    buf.add(make_episode(3, rng, dead_from=None))
-    both = buf.sample(2, np.random.default_rng(0))
-    assert both.index is not None
-    first = int(torch.argmax(both.filled.sum(1)))  # the full-length episode, cut the same alone
-    alone = replace(both, **{f: getattr(both, f)[first : first + 1] for f in _FIELDS}, index=None)
-
-    def train(batch: Batch) -> tuple[float, torch.Tensor]:
-        torch.manual_seed(0)
-        learner = _learner(mixer)
-        return learner.train(batch)["loss"], learner.episode_errors.clone()
-
-    loss, errors = train(both)
-    assert train(replace(both, weights=torch.ones(2)))[0] == loss  # unit weights: no change
-    assert errors.shape == (2,) and bool((errors > 0).all())
-    only = torch.zeros(2)
-    only[first] = 1.0
-    loss_only, errors_only = train(replace(both, weights=only))
-    loss_alone, errors_alone = train(alone)
-    # The loss is still averaged over both episodes' terms, but only the first one's count.
-    steps = _masked_steps(both, mixer)
-    assert loss_only * float(steps.sum()) == pytest.approx(loss_alone * float(steps[first]))
-    assert errors_only[first] == pytest.approx(float(errors_alone[0]))
-    assert errors_only.tolist() == pytest.approx(errors.tolist())  # weights leave errors alone

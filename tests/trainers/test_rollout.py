@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from neuronsmae.protocol import EnvInfo
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
 from neuronsmae.trainers.rollout import Policy, RolloutWorker
@@ -41,7 +42,7 @@ def worker() -> Iterator[RolloutWorker]:
 
 
 def _policy(w: RolloutWorker) -> tuple[Policy, EnvSpec]:
-    env = EnvSpec.from_env_info(w.env_info())
+    env = EnvSpec.of(EnvInfo.from_dict(w.env_info()))
     spec = agent_spec(env, 16, True, True)
     weights = {k: v.numpy() for k, v in spec.build().state_dict().items()}
     return Policy(spec, weights), env

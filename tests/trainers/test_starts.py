@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from neuronsmae.trainers.config import ConfigError, make_config
-from neuronsmae.trainers.starts import StartReplay
+from neuronsmae.trainers.experimental import StartReplay
 
 
 def _fresh(k: int) -> int:

@@ -77,7 +77,7 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     result = play(str(out / "checkpoint.pt"), "easy", 2, 1_000_000_000)
     assert result["episodes"] == 2
     assert result["blue_win_rate"] + result["red_win_rate"] + result["draw_rate"] == 1.0
-    assert second["config"]["agent_hidden"] == 16  # the saved config was kept
+    assert second["config"]["learner"]["agent_hidden"] == 16  # the saved config was kept
     steps = _episodes_column(out / "train.csv")
     assert steps == sorted(steps) and steps[-1] == 12
     assert _episodes_column(out / "eval.csv")[-1] == 12
@@ -109,33 +109,16 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
             "eval_every": 0,
         },
         dict(kv.split("=") for kv in TINY),
-        # augment, the mates' actions and prioritised replay ride along: they must work
-        # inside the real loop
-        {
-            "learning_starts": 2,
-            "lr": 1e-3,
-            "lr_final": 1e-4,
-            "augment": "enemies,field,allies",
-            "ally_action_input": True,
-            "priority_alpha": 0.6,
-            "start_replay": 1.0,
-        },
+        # augment and the replay of lost starts ride along: they must work inside the real loop
+        {"learning_starts": 2, "augment": "enemies,field,allies", "start_replay": 1.0},
     )
     trainer = Trainer(cfg)
     assert len(trainer.group) == 8
-    assert trainer.spec.ally_actions
     assert trainer.spec.input_dim == trainer.learner.agent.fc1.in_features
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
     # one training round per iteration of 2 episodes (the first fills learning_starts)
-    assert trainer.learner.updates == 2 * cfg.updates_per_round
-    # the schedule follows the episode budget: half way after 2 episodes, lr_final after 4
-    with (tmp_path / "train.csv").open() as f:
-        lrs = [float(row["lr"]) for row in csv.DictReader(f) if row["lr"]]
-    assert lrs == pytest.approx([5.5e-4, 1e-4])
-    # replayed episodes carry their TD errors as priorities (new ones start at 1)
-    priorities = trainer.buffer.priorities[: len(trainer.buffer)]
-    assert (priorities != 1.0).any() and trainer.buffer.max_priority >= priorities.max()
+    assert trainer.learner.updates == 2 * cfg.learner.updates_per_round
     # p = 1: the second iteration replays the first iteration's starts not won (each once,
     # never both at once) and plays fresh seeds only for the rest
     first = {e.info["seed"]: e.info["winner"] == "blue" for e in list(trainer.recent)[:2]}
@@ -143,45 +126,42 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
     assert lost  # the untrained agents lose a start of the first iteration: replay is exercised
     second = trainer.stored_seeds[2:]
     assert sorted(s for s in second if s in first) == lost
-    fresh = [train_seed(cfg.seed, k, cfg.eval_seed) for k in range(4)]
+    fresh = [train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(4)]
     assert all(s in first or s in fresh[2:] for s in second)
     assert result["start_replays"] == len(lost) and set(fresh[:2]) == set(first)
     saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)["starts"]
     assert saved["replays"] == len(lost) and len(saved["seeds"]) == len(saved["plays"])
 
 
-@pytest.mark.parametrize("eval_ema", [0.0, 0.5])
 def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
-    tmp_path: Path, eval_ema: float
+    tmp_path: Path,
 ) -> None:
     cfg = make_config(
         {"alg": "vdn", "workers": 1, "episodes": 6, "out": str(tmp_path), "progress": False},
         dict(kv.split("=") for kv in TINY),
-        {"eval_every": 2, "eval_episodes": 3, "final_eval_episodes": 4, "eval_ema": eval_ema},
+        {"eval_every": 2, "eval_episodes": 3, "final_eval_episodes": 4},
     )
     trainer = Trainer(cfg)
     played: dict[str, set[int]] = {"validation": set(), "test": set()}
     run = trainer.sampler.run
-    averaged = []  # per evaluation: did it play weights other than the latest?
 
     def recording_run(requests: list[Request]) -> list[Episode]:
-        split = "test" if requests[0].seed >= cfg.eval_seed + TEST_SEED_OFFSET else "validation"
+        test = requests[0].seed >= cfg.eval.eval_seed + TEST_SEED_OFFSET
+        split = "test" if test else "validation"
         played[split].update(r.seed for r in requests)
         sent = ray.get(trainer.sampler.weights_ref).weights
 
         def same(w: dict[str, np.ndarray]) -> bool:
             return all(np.array_equal(sent[k], v) for k, v in w.items())
 
-        if same(trainer.learner.policy_weights()):  # validation, and the final test
-            averaged.append(not same(trainer.learner.acting_weights()))
-        else:  # the best-validated weights' test
+        if not same(trainer.learner.acting_weights()):  # the best-validated weights' test
             assert split == "test" and trainer.best is not None and same(trainer.best[0])
         return run(requests)
 
     trainer.sampler.run = recording_run  # type: ignore[method-assign]
     result = trainer.run()
-    assert played["validation"] == {cfg.eval_seed + k for k in range(3)}
-    assert played["test"] == {cfg.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
+    assert played["validation"] == {cfg.eval.eval_seed + k for k in range(3)}
+    assert played["test"] == {cfg.eval.eval_seed + TEST_SEED_OFFSET + k for k in range(4)}
     best, validation = result["best"], [e for e in result["evals"] if e["split"] == "validation"]
     assert best["split"] == "test" and best["weights"] == "best"
     top = max(e["win_rate"] for e in validation)
@@ -192,15 +172,14 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
     )
     assert best["validation"]["episodes"] == best["chosen_at_episodes"]
     assert (tmp_path / "best.pt").is_file()
-    # the checkpoints hand the match command the evaluated weights (the average, when kept)
+    # the checkpoints hand the match command the weights they were written with
     assert trainer.best is not None
     for path, weights in (
         (tmp_path / "best.pt", trainer.best[0]),
-        (tmp_path, trainer.learner.policy_weights()),
+        (tmp_path, trainer.learner.acting_weights()),
     ):
         loaded = load_policy(path).weights
         assert all(np.array_equal(loaded[k], v) for k, v in weights.items())
-    assert any(averaged) == (eval_ema > 0)
 
 
 def test_no_validation_once_the_wall_clock_budget_is_spent(tmp_path: Path) -> None:
@@ -252,7 +231,7 @@ def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: P
     assert result["counters"]["episodes"] == n
     # every training seed was stored exactly once: the interrupted one was replayed whole
     assert sorted(trainer.stored_seeds) == sorted(
-        train_seed(cfg.seed, k, cfg.eval_seed) for k in range(n)
+        train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(n)
     )
     buf = trainer.buffer
     for i in range(len(buf)):

@@ -1,16 +1,17 @@
 """Replay of training starts the team did not win: a simple form of level replay.
 
 Why: a start (the reset seed: spawn poses and the bot's draws) decides much of a game
-against the easy bot. The agents lose the starts they already judge bad (docs/results.md,
-session 8: 19 of 22 test losses fell in the lowest two fifths of the opening value), but
-uniform seeds give those starts only their share of the data. Prioritized Level Replay
-(Jiang, Grefenstette and Rocktäschel, ICML 2021) samples procedurally generated levels
-again in proportion to how much there is left to learn on them; here the signal is the
-outcome itself: a start the team did not win is queued, and with probability ``p`` a new
-training episode replays one of the queued starts, drawn uniformly, instead of a fresh
-seed. A start leaves the queue when it is won or has been played ``max_plays`` times (some
-starts are lost by every policy), and the queue keeps only the ``capacity`` most recently
-lost starts, so it follows the current policy.
+against the easy bot. The agents lose the starts they already judge bad (measured: 19 of 22
+test losses of a default run fell in the lowest two fifths of the agents' own value of the
+start, ``python -m bench.outcomes RUN_DIR/checkpoint.pt --episodes 200``), but uniform
+seeds give those starts only their share of the data. Prioritized Level Replay (Jiang,
+Grefenstette and Rocktäschel, ICML 2021) samples procedurally generated levels again in
+proportion to how much there is left to learn on them; here the signal is the outcome
+itself: a start the team did not win is queued, and with probability ``p`` a new training
+episode replays one of the queued starts, drawn uniformly, instead of a fresh seed. A start
+leaves the queue when it is won or has been played ``max_plays`` times (some starts are
+lost by every policy), and the queue keeps only the ``capacity`` most recently lost starts,
+so it follows the current policy.
 
 Replays are training episodes like any other (same ε, stored in the buffer); every seed is
 still a training seed, so the validation and test splits are untouched.

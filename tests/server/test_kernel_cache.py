@@ -1,0 +1,132 @@
+"""numba's kernel cache follows every source a kernel depends on, not only its own file."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numba
+import pytest
+
+import neuronsmae
+from neuronsmae.protocol import errors
+from neuronsmae.server.sim import kernel_cache
+
+PACKAGE_DIRS = {
+    "neuronsmae": Path(neuronsmae.__file__).parent,
+    "neuronsmae/server": kernel_cache.SIM.parent,
+    "neuronsmae/protocol": Path(errors.__file__).parent,
+}
+"""Where each part of the installed package lives (the repository maps folders to them)."""
+
+
+def _imported_modules(path: Path, package: str) -> set[str]:
+    """Names of the ``neuronsmae`` modules ``path`` imports (``from X import y`` counts ``X.y``
+    when that is a module), with relative imports resolved against ``package``."""
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{parent}.{base}".rstrip(".")
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)
+    return {n for n in names if n.startswith("neuronsmae.") and _is_module(n)}
+
+
+def _is_module(name: str) -> bool:
+    try:
+        return importlib.util.find_spec(name) is not None
+    except ModuleNotFoundError:  # ``X.y`` where y is a name inside module X
+        return False
+
+
+def test_every_module_a_kernel_module_imports_is_hashed() -> None:
+    hashed = {p.resolve() for p in kernel_cache.kernel_sources()}
+    for path in sorted(hashed):
+        if path.parent.name not in ("sim", "task"):
+            continue
+        package = f"neuronsmae.server.{path.parent.name}"
+        for name in _imported_modules(path, package):
+            spec = importlib.util.find_spec(name)
+            assert spec is not None and spec.origin is not None
+            origin = Path(spec.origin).resolve()
+            if origin.name != "__init__.py":
+                assert origin in hashed, f"{path.name} imports {name}, which the hash misses"
+
+
+def test_every_cached_kernel_lives_in_a_hashed_file() -> None:
+    hashed = {p.resolve() for p in kernel_cache.kernel_sources()}
+    for root in {*PACKAGE_DIRS.values(), Path(neuronsmae.__file__).parents[1] / "trainers"}:
+        for path in root.rglob("*.py"):
+            if "cache=True" in path.read_text():
+                assert path.resolve() in hashed, path
+
+
+def test_numba_caches_under_the_hash_of_this_source_tree() -> None:
+    directory = kernel_cache.configure()
+    assert str(directory) == numba.config.CACHE_DIR
+    assert directory.name == kernel_cache.source_hash()
+    assert directory.parent == kernel_cache.cache_root() or "neuronsmae-numba" in str(directory)
+
+
+PROBE = """
+import json, numba, numpy as np
+import neuronsmae
+from neuronsmae.server.task.observations import vector_obs_kernel
+out = np.empty((1, 11))
+vector_obs_kernel(
+    np.array([[0, 1]]), 1, np.zeros((2, 3)), np.array([0]), np.zeros((0, 1, 1, 2)), 0.0,
+    np.full(2, 600.0), np.full(2, 600.0), np.full(2, 185.0), np.ones((1, 1), bool), -1.0, out,
+)
+print(json.dumps({
+    "package": neuronsmae.__file__,
+    "cache": numba.config.CACHE_DIR,
+    "hits": sum(vector_obs_kernel.stats.cache_hits.values()),
+    "bullets": float(out[0, -1]),
+}))
+"""
+"""Runs ``vector_obs_kernel``, whose bullet columns divide by ``START_BULLETS``, a constant of
+another file (``sim/field.py``): 185 bullets read 0.0 with 370 to start with."""
+
+
+@pytest.mark.slow
+def test_editing_a_dependency_recompiles_the_kernel(tmp_path: Path) -> None:
+    tree = tmp_path / "tree"
+    for part, source in PACKAGE_DIRS.items():
+        target = tree / part
+        if part == "neuronsmae":
+            target.mkdir(parents=True)
+            shutil.copy(source / "__init__.py", target / "__init__.py")
+        else:
+            shutil.copytree(source, target, ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def probe() -> dict:
+        done = subprocess.run(
+            [sys.executable, "-c", PROBE], env=env, cwd=tmp_path, capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)
+
+    first, again = probe(), probe()
+    assert first["package"].startswith(str(tree))  # the copy ran, not the installed package
+    assert first["bullets"] == 0.0 and again["bullets"] == 0.0
+    assert first["hits"] == 0 and again["hits"] == 1  # compiled once, then read from the cache
+    assert first["cache"] == again["cache"]
+    field = tree / "neuronsmae/server/sim/field.py"
+    text = field.read_text()
+    assert "START_BULLETS = 370\n" in text
+    field.write_text(text.replace("START_BULLETS = 370\n", "START_BULLETS = 185\n"))
+    edited = probe()
+    assert edited["bullets"] == 1.0  # the new constant, not the cached kernel's
+    assert edited["hits"] == 0 and edited["cache"] != first["cache"]

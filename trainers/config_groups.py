@@ -1,0 +1,212 @@
+"""The groups of the training configuration: learner, evaluation and cluster settings.
+
+Each group is a frozen dataclass with one docstring per field (``neuronsmae-train
+--help-config`` prints them) and checks its own values; :class:`~.config.TrainConfig`
+nests one of each. Keys are addressed as ``learner.lr`` or, when the name is unique across
+groups, as the bare ``lr`` (:mod:`neuronsmae.trainers.config`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
+from neuronsmae.trainers.symmetry import parse_generators
+
+SERVER_PLACEMENTS = ("local", "actors")
+"""``remote``: where each worker's server runs (see ``trainers/placement.py``)."""
+
+
+class ConfigError(ValueError):
+    """An unknown key, a value of the wrong type, or a value out of range."""
+
+
+def check_choice(name: str, value: Any, valid: Iterable[Any]) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is one of ``valid`` (listed)."""
+    valid = list(valid)
+    if value not in valid:
+        raise ConfigError(f"{name}={value!r} is not valid; valid: {', '.join(map(str, valid))}")
+
+
+def check_positive(owner: object, *names: str) -> None:
+    """Raise :class:`ConfigError` unless every named integer field is ≥ 1."""
+    for name in names:
+        if getattr(owner, name) < 1:
+            raise ConfigError(f"{name} must be ≥ 1, got {getattr(owner, name)}")
+
+
+def parse_resources(text: str) -> dict[str, float]:
+    """``"sampler=1,big_node=0.5"`` → ``{"sampler": 1.0, "big_node": 0.5}`` ("" → {}).
+
+    Only custom resources: CPUs are ``worker_cpus``, and Ray owns the built-in names.
+    """
+    out: dict[str, float] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        name, sep, amount = (x.strip() for x in item.partition("="))
+        try:
+            value = float(amount) if sep else 1.0
+        except ValueError:
+            raise ConfigError(f"resource {item!r}: expected name=amount") from None
+        if not name or value <= 0 or name in ("CPU", "GPU", "memory", "object_store_memory"):
+            raise ConfigError(f"resource {item!r}: expected a custom name and an amount > 0")
+        out[name] = value
+    return out
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """The algorithm's hyper-parameters: optimiser, exploration, networks, replay."""
+
+    lr: float = 5e-4
+    """Adam learning rate, > 0 (paper: 5e-4). 1e-3 reaches 0.8 against the easy bot sooner
+    but stays there; 5e-4 climbs higher (docs/results.md)."""
+    gamma: float = 0.99
+    """Discount in [0, 1] (paper: 0.99)."""
+    eps_start: float = 0.2
+    """Initial exploration ε in [0, 1] (paper: 0.2)."""
+    eps_end: float = 0.05
+    """Final exploration ε in [0, 1] (paper: 0.05)."""
+    eps_anneal_episodes: int = 1500
+    """Training episodes over which ε falls linearly from eps_start to eps_end."""
+    target_update_interval: int = 100
+    """Gradient updates between hard target refreshes, ≥ 1 (100 = every 50 episodes at the
+    default 2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100
+    episodes). Refreshing every 10 episodes kept the greedy win rate oscillating."""
+    grad_clip: float = 10.0
+    """Gradient-norm clip (paper: 10)."""
+    agent_hidden: int = 128
+    """GRU width of the shared agent network (paper: 128)."""
+    mixer_embed: int = 32
+    """QMIX mixing-layer width (paper: 32)."""
+    hypernet_hidden: int = 64
+    """QMIX hypernetwork hidden width."""
+    td_lambda: float = 0.3
+    """λ of the TD(λ) targets in [0, 1] (0: the paper's one-step targets; PyMARL2 uses 0.6).
+    Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
+    while λ > 0 still moves a win's +20 back faster. Measured against the easy bot in 30
+    minutes on 2 cores, test win rate over seeds 1-3: 0.89 / 0.885 / 0.86 with 0.3, 0.90 /
+    0.86 with 0.1 (seeds 1-2), 0.86 / 0.875 with 0.6 (``python bench/bench_learning.py
+    --set td_lambda=0.6 --seed 2``)."""
+    double_q: bool = True
+    """Pick the next action with the online network, value it with the target network."""
+    features: str = "relative"
+    """Agent inputs: raw (the paper's: the observation as given) or relative (plus geometry
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2)."""
+    head: str = "points"
+    """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
+    that scores each action from its enemy's and point's features; needs 'relative'). On the
+    easy bot it roughly doubles the greedy win rate after 500 episodes (measured: ``python
+    bench/bench_learning.py --episodes 500 --set head=flat`` against the defaults)."""
+    augment: str = "enemies,field,allies"
+    """Replay each sampled episode under a random symmetry of the task, so the learner sees
+    every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
+    enemy slots), field (turn the scene half a turn about the field's centre) and allies
+    (swap the agents); see trainers/symmetry.py. Against the easy bot all three reach the
+    0.85 plateau in about half the episodes, but not higher (measured: 0.74-0.86 after 1,000
+    episodes against 0.625-0.78 with ``python bench/bench_learning.py --set augment=none``)."""
+    last_action_input: bool = True
+    """Give the agent network its one-hot last action."""
+    agent_id_input: bool = True
+    """Give the agent network its one-hot agent index."""
+    buffer_size: int = 5000
+    """Replay capacity in episodes."""
+    batch_size: int = 32
+    """Episodes per gradient update."""
+    learning_starts: int = 64
+    """Episodes in the buffer before learning begins."""
+    train_every: int = 1
+    """Asynchronous mode: episodes collected between training rounds."""
+    updates_per_round: int = 2
+    """Gradient updates per training round (per iteration in synchronous mode)."""
+
+    def __post_init__(self) -> None:
+        check_choice("features", self.features, FEATURES)
+        check_choice("head", self.head, ("flat", "points"))
+        if self.head == "points" and self.features not in POINT_FEATURES:
+            raise ConfigError(
+                f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"
+            )
+        try:
+            parse_generators(self.augment)
+        except ValueError as err:
+            raise ConfigError(str(err)) from None
+        check_positive(
+            self, "batch_size", "buffer_size", "train_every", "updates_per_round",
+            "target_update_interval", "agent_hidden", "mixer_embed", "hypernet_hidden",
+        )  # fmt: skip
+        if self.lr <= 0:
+            raise ConfigError(f"lr must be > 0, got {self.lr}")
+        for name in ("eps_start", "eps_end", "gamma", "td_lambda"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Greedy evaluations, model selection and checkpoints."""
+
+    eval_every: int = 500
+    """Training episodes between greedy evaluations (0 disables them until the end)."""
+    eval_episodes: int = 50
+    """Greedy episodes per evaluation, on held-out seeds."""
+    final_eval_episodes: int = 200
+    """Greedy episodes of the final evaluation at the end of the run (200: a win rate near
+    0.9 is then known to about ±0.04)."""
+    eval_seed: int = 1_000_000_000
+    """First held-out seed; training episodes use seeds below it. Periodic evaluations
+    (validation) use ``eval_seed + k``; the final evaluation (test) uses
+    ``eval_seed + TEST_SEED_OFFSET + k``, so the figures reported at the end never come from
+    the seeds that chose the best weights."""
+    keep_best: bool = True
+    """Keep the weights of the best periodic evaluation, write them to ``best.pt`` and
+    evaluate them on the test seeds at the end beside the final weights (model selection
+    on validation seeds, as is usual when reporting greedy win rates). Equal readings go to
+    the later weights, which trained longer."""
+    checkpoint_every: int = 1000
+    """Training episodes between checkpoints (one is always written at the end)."""
+
+    def __post_init__(self) -> None:
+        check_positive(self, "eval_episodes", "final_eval_episodes", "checkpoint_every")
+        if self.eval_every < 0 or self.eval_seed < 1:
+            raise ConfigError(
+                f"eval_every must be ≥ 0 and eval_seed ≥ 1, got {self.eval_every} and "
+                f"{self.eval_seed}"
+            )
+
+
+@dataclass(frozen=True)
+class ClusterConfig:
+    """Where sampling runs: the Ray cluster, worker placement and the remote servers."""
+
+    address: str = ""
+    """Ray cluster to join (ray.init address); empty always starts a new local Ray."""
+    worker_cpus: float = 0.5
+    """CPUs Ray reserves per worker, > 0 (fractions let workers share a core with the
+    learner)."""
+    base_port: int = 10000
+    """env=remote: worker i talks to the server on base_port + i."""
+    max_worker_failures: int = 5
+    """Consecutive failures after which a worker is given up instead of restarted."""
+    worker_resources: str = ""
+    """Custom Ray resources each worker also requires, "name=amount[,...]" (e.g. "sampler=1"
+    puts workers only on nodes started with --resources '{"sampler": N}', N per node)."""
+    servers: str = "local"
+    """env=remote: local (each worker launches its server on its own node, loopback only)
+    or actors (a Ray actor per worker runs its server on a node Ray picks, reached by node
+    IP)."""
+    server_resources: str = ""
+    """servers=actors: custom Ray resources each server actor requires, like
+    worker_resources."""
+    router: str = ""
+    """env=remote: reach server base_port + i through this Zenoh router (tcp/host:7447)
+    instead; the servers run outside Ray (neuronsmae-serve --router). See deploy/README.md."""
+
+    def __post_init__(self) -> None:
+        check_choice("servers", self.servers, SERVER_PLACEMENTS)
+        parse_resources(self.worker_resources)
+        parse_resources(self.server_resources)
+        check_positive(self, "max_worker_failures")
+        if self.worker_cpus <= 0:
+            raise ConfigError(f"worker_cpus must be > 0, got {self.worker_cpus}")
