@@ -1,20 +1,24 @@
-"""Ray sampling throughput: the trainers' rollout workers against the in-process rate.
+"""Sampling throughput: the trainers' rollout workers against the bare arena, same run.
 
-    python -m bench.bench_sampling [--workers 1 2 4] [--seconds 20] [--repeats 3] [--env inprocess]
+    python -m bench.bench_sampling [--envs 1 8] [--workers 1 2] [--seconds 10] [--repeats 3]
 
-What a learner sees: env steps per second of *finished episodes* returned by the
-``Sampler`` (the same Ray actors, ε-greedy GRU policy, feature code and episode packing that
-training uses, ``pipeline`` requests in flight per worker), for each worker count. Beside it,
-in the same run, the in-process rate: one ``RolloutWorker`` (the plain class, no Ray)
-playing episodes in this process. Both use an untrained agent network (acting costs the
-same whatever the weights) at ε = 0.2 against the easy bot.
+What a learner sees: env steps (decisions) per second of *finished episodes*, policy
+included: the ε-greedy GRU agent of the default architecture (untrained: acting costs the
+same whatever the weights) at ε = 0.2 against the easy bot, the feature code and the
+episode packing that training uses. Rows:
 
-Rounds alternate between the in-process loop and every worker count, so load from other
-processes hits them alike; each figure is the median over ``--repeats`` rounds. The ratio
-column is the median of the paired (Ray / in-process) round ratios. Learning is not
-included (the learner would compete for the same cores); docs/results.md reports the
-steps/s of whole training runs. Prints a Markdown table and writes
-bench/out/sampling.json.
+* **bare arena**: one in-process ``Arena`` stepped with random available actions, no
+  policy, no packing: the simulator's own rate on one core, the reference of every ratio;
+* **worker, no Ray**: one ``RolloutWorker`` with ``envs`` in-process arenas called directly
+  in this process (one batched forward per decision for all its arenas);
+* **Ray**: the trainers' ``Sampler`` with ``workers`` Ray actors of ``envs`` arenas each,
+  ``inprocess`` (a ``VecArena`` in the worker) or ``remote`` (a ``VecRM`` of the worker's
+  own vector server, unpaced), two chunks in flight per worker, ``per_worker`` = total / n.
+
+**Target: a worker delivers ≥ 0.75 of the bare rate with envs = 8** (the ``ratio`` column:
+per-worker rate / bare rate, medians of the paired rounds). Rounds alternate between every
+row, so load from other processes hits them alike. Learning is not included (it would
+compete for the same cores). Prints a Markdown table and writes bench/out/sampling.json.
 """
 
 from __future__ import annotations
@@ -26,16 +30,20 @@ import statistics
 import time
 from typing import Any
 
+import numpy as np
 import ray
 
 from bench.common import machine, table, write_json
 from neuronsmae.protocol import EnvInfo
+from neuronsmae.server import Arena
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
-from neuronsmae.trainers.rollout import Policy, RolloutWorker
-from neuronsmae.trainers.sampler import Request, Sampler
+from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
+from neuronsmae.trainers.sampler import Sampler
 
 CONTEXTS = {"level": "easy"}
 EPSILON = 0.2
+TARGET = 0.75
+TARGET_ENVS = 8
 
 
 def make_policy(info: dict[str, Any]) -> Policy:
@@ -47,12 +55,25 @@ def make_policy(info: dict[str, Any]) -> Policy:
     return Policy(spec, weights)
 
 
-def in_process_round(worker: RolloutWorker, policy: Policy, seconds: float, seed: int) -> float:
-    """Env steps per second of whole episodes played in this process for ``seconds``."""
-    steps, start, k = 0, time.perf_counter(), 0
+def bare_round(arena: Arena, seconds: float, rng: np.random.Generator) -> float:
+    """Decisions per second of an arena driven with random available actions."""
+    steps, start = 0, time.perf_counter()
+    arena.reset(CONTEXTS)
     while time.perf_counter() - start < seconds:
-        steps += worker.run_episode(policy, 0, EPSILON, seed + k, CONTEXTS).obs.shape[0] - 1
-        k += 1
+        actions = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+        if arena.step(actions)[2]:
+            arena.reset(CONTEXTS)
+        steps += 1
+    return steps / (time.perf_counter() - start)
+
+
+def worker_round(worker: RolloutWorker, policy: Policy, seconds: float, seed: int) -> float:
+    """Env steps per second of whole episodes a worker plays in this process."""
+    steps, start, k = 0, time.perf_counter(), seed
+    while time.perf_counter() - start < seconds:
+        requests = [Request(k + j, EPSILON, CONTEXTS) for j in range(worker.envs)]
+        steps += sum(e.length for e in worker.run(policy, 0, requests))
+        k += worker.envs
     return steps / (time.perf_counter() - start)
 
 
@@ -63,96 +84,100 @@ def ray_round(sampler: Sampler, seconds: float, seed: int) -> float:
     count, and the window ends at the last landing, so a half-played episode is never
     credited.
     """
-    k = 0
-    while sampler.idle_slots() > 0:
-        sampler.submit(Request(seed + k, EPSILON))
-        k += 1
+    k = seed
+
+    def fill() -> None:
+        nonlocal k
+        while sampler.idle_slots() > 0:
+            sampler.submit([Request(k + j, EPSILON, CONTEXTS) for j in range(sampler.envs)])
+            k += sampler.envs
+
+    fill()
     steps, start, last = 0, time.perf_counter(), time.perf_counter()
     while time.perf_counter() - start < seconds:
-        for episode in sampler.wait():
-            steps += episode.obs.shape[0] - 1
+        for episode in sampler.wait(timeout=seconds):
+            steps += episode.length
             last = time.perf_counter()
-        while sampler.idle_slots() > 0:
-            sampler.submit(Request(seed + k, EPSILON))
-            k += 1
-    sampler.wait()  # let in-flight episodes land before the next round
-    while sampler.in_flight:
-        sampler.wait()
+        fill()
+    while sampler.in_flight:  # let in-flight episodes land before the next round
+        sampler.wait(timeout=120)
     return steps / max(last - start, 1e-9)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
-    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--envs", type=int, nargs="+", default=[1, 8])
+    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--env", nargs="+", default=["inprocess", "remote"])
+    parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--env", choices=["inprocess", "remote"], default="inprocess")
     parser.add_argument("--worker-cpus", type=float, default=0.5)
-    parser.add_argument("--base-port", type=int, default=12000)
     args = parser.parse_args()
 
+    combos = [(n, e, kind) for n in args.workers for e in args.envs for kind in args.env]
     # Every sampler's actors live at once (rounds interleave), so Ray must be told there
     # are enough CPUs for all of them; they still share the machine's real cores.
-    cpus = math.ceil(sum(args.workers) * args.worker_cpus) + 1
+    cpus = math.ceil(sum(n for n, _, _ in combos) * args.worker_cpus) + 1
     ray.init(
         num_cpus=cpus, include_dashboard=False, logging_level=logging.WARNING, log_to_driver=False
     )
-    local = RolloutWorker(0, "inprocess", 1, args.base_port - 1)
-    policy = make_policy(local.env_info())
-    samplers: dict[int, Sampler] = {}
+    arena = Arena(seed=1)
+    local = {e: RolloutWorker(0, "inprocess", 1, None, envs=e) for e in args.envs}
+    policy = make_policy(local[args.envs[0]].env_info())
+    samplers: dict[tuple[int, int, str], Sampler] = {}
+    rounds: dict[str, list[float]] = {"bare": []}
     try:
-        for n in args.workers:
-            samplers[n] = Sampler(
-                n,
-                env_kind=args.env,
-                base_seed=1000,
-                base_port=args.base_port + 100 * n,
-                contexts=CONTEXTS,
-                worker_cpus=args.worker_cpus,
+        for n, e, kind in combos:
+            sampler = Sampler(
+                n, env_kind=kind, base_seed=1000, envs_per_worker=e, worker_cpus=args.worker_cpus
             )
-            samplers[n].broadcast(policy)
-            samplers[n].run([Request(k, EPSILON) for k in range(n)])  # warm up every worker
-        in_process_round(local, policy, 2.0, 0)
-        rounds: dict[str, list[float]] = {"in_process": [], **{str(n): [] for n in samplers}}
+            sampler.broadcast(policy)
+            sampler.run([Request(k, EPSILON, CONTEXTS) for k in range(n * e)])  # warm up
+            samplers[(n, e, kind)] = sampler
+        for worker in local.values():
+            worker_round(worker, policy, 2.0, 0)
+        bare_round(arena, 2.0, np.random.default_rng(0))
         for r in range(args.repeats):
             seed = 100_000 * (r + 1)
-            rounds["in_process"].append(in_process_round(local, policy, args.seconds, seed))
-            for n, sampler in samplers.items():
-                rounds[str(n)].append(ray_round(sampler, args.seconds, seed))
+            rounds["bare"].append(bare_round(arena, args.seconds, np.random.default_rng(r)))
+            for e, worker in local.items():
+                key = f"worker {e}"
+                rounds.setdefault(key, []).append(worker_round(worker, policy, args.seconds, seed))
+            for (n, e, kind), sampler in samplers.items():
+                key = f"ray {n} {e} {kind}"
+                rounds.setdefault(key, []).append(ray_round(sampler, args.seconds, seed) / n)
     finally:
         for sampler in samplers.values():
             sampler.close()
-        local.close()
+        for worker in local.values():
+            worker.close()
+        arena.close()
         ray.shutdown()
 
-    base = rounds["in_process"]
-    rows: list[dict[str, Any]] = [
-        {
-            "sampling": "in-process loop (no Ray)",
-            "workers": 1,
-            "steps_per_s": statistics.median(base),
-            "ratio": 1.0,
-            "per_worker": statistics.median(base),
+    base = rounds["bare"]
+
+    def row(label: str, workers: int, envs: int | str, env: str, key: str) -> dict[str, Any]:
+        rates = rounds[key]
+        return {
+            "sampling": label,
+            "workers": workers,
+            "envs": envs,
+            "env": env,
+            "steps_per_s_per_worker": statistics.median(rates),
+            "ratio": statistics.median([a / b for a, b in zip(rates, base, strict=True)]),
         }
-    ]
-    for n in samplers:
-        rates = rounds[str(n)]
-        rows.append(
-            {
-                "sampling": f"Ray, env={args.env}",
-                "workers": n,
-                "steps_per_s": statistics.median(rates),
-                "ratio": statistics.median([a / b for a, b in zip(rates, base, strict=True)]),
-                "per_worker": statistics.median(rates) / n,
-            }
-        )
-    print(table(rows, ["sampling", "workers", "steps_per_s", "ratio", "per_worker"]))
+
+    rows = [row("bare arena, random actions", 1, 1, "inprocess", "bare")]
+    rows += [row("worker, no Ray", 1, e, "inprocess", f"worker {e}") for e in local]
+    rows += [row("Ray sampler", n, e, k, f"ray {n} {e} {k}") for n, e, k in samplers]
+    print(table(rows, ["sampling", "workers", "envs", "env", "steps_per_s_per_worker", "ratio"]))
+    print(f"target: per-worker rate ≥ {TARGET} of the bare arena's with envs = {TARGET_ENVS}")
     report = {
         "seconds_per_round": args.seconds,
         "repeats": args.repeats,
-        "env": args.env,
         "worker_cpus": args.worker_cpus,
         "epsilon": EPSILON,
+        "target": {"ratio": TARGET, "envs": TARGET_ENVS},
         "rows": rows,
         "rounds": rounds,
         "machine": machine(),

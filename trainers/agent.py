@@ -126,20 +126,24 @@ def masked_greedy(q: torch.Tensor, avail: torch.Tensor) -> torch.Tensor:
 
 
 def epsilon_greedy(
-    q: torch.Tensor, avail: torch.Tensor, epsilon: float, generator: torch.Generator
+    q: torch.Tensor,
+    avail: torch.Tensor,
+    epsilon: float | torch.Tensor,
+    generator: torch.Generator,
 ) -> torch.Tensor:
     """Pick one action per agent: uniform over the available ones with probability ε.
 
-    ``q [n, A]`` and ``avail [n, A]`` (1 = allowed) → ``actions [n]`` (int64). Exploration
-    draws only among available actions, so a destroyed robot always gets its no-op and an
-    unavailable action is never sent. Raises ``ValueError`` if an agent has none available,
-    which the environment contract rules out.
+    ``q [n, A]`` and ``avail [n, A]`` (1 = allowed) → ``actions [n]`` (int64). ``epsilon`` is
+    one rate for every row or a ``[n]`` tensor of rates (a batched worker's rows belong to
+    episodes at different ε). Exploration draws only among available actions, so a
+    destroyed robot always gets its no-op and an unavailable action is never sent. Raises
+    ``ValueError`` if an agent has none available, which the environment contract rules out.
     """
     allowed = avail > 0
     if not bool(allowed.any(dim=-1).all()):
         raise ValueError("an agent has no available action; the env must allow at least no-op")
     greedy = masked_greedy(q, allowed)
-    if epsilon <= 0.0:
+    if not bool(torch.as_tensor(epsilon).gt(0.0).any()):
         return greedy
     random_pick = torch.multinomial(allowed.to(torch.float64), 1, generator=generator).squeeze(-1)
     explore = torch.rand(q.shape[0], generator=generator) < epsilon

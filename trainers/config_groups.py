@@ -185,8 +185,11 @@ class ClusterConfig:
     worker_cpus: float = 0.5
     """CPUs Ray reserves per worker, > 0 (fractions let workers share a core with the
     learner)."""
-    base_port: int = 10000
-    """env=remote: worker i talks to the server on base_port + i."""
+    base_port: int = 0
+    """env=remote: 0 (the default) gives every worker a private server on a free port, so
+    runs never collide; a port P makes worker i use the server on P + i (a fleet started
+    with ``neuronsmae-serve --base-port P --arenas envs_per_worker``), launching one there
+    if none answers."""
     max_worker_failures: int = 5
     """Consecutive failures after which a worker is given up instead of restarted."""
     worker_resources: str = ""
@@ -208,5 +211,9 @@ class ClusterConfig:
         parse_resources(self.worker_resources)
         parse_resources(self.server_resources)
         check_positive(self, "max_worker_failures")
+        if not 0 <= self.base_port < 65536:
+            raise ConfigError(
+                f"base_port must be 0 (private servers) or a port, got {self.base_port}"
+            )
         if self.worker_cpus <= 0:
             raise ConfigError(f"worker_cpus must be > 0, got {self.worker_cpus}")

@@ -20,7 +20,7 @@ from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
 from neuronsmae.trainers.config import LEVELS
 from neuronsmae.trainers.learner import AgentSpec
-from neuronsmae.trainers.rollout import Policy, RolloutWorker
+from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
 
 
 def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
@@ -121,14 +121,17 @@ def evaluate_checkpoint(
     *,
     contexts: Mapping[str, Any] | None = None,
     env: str = "inprocess",
-    port: int = 10000,
+    port: int | None = None,
+    envs: int = 8,
 ) -> dict[str, Any]:
     """Play a checkpoint greedily against the ``level`` bot for ``episodes`` episodes.
 
     Episode ``k`` is reset with seed ``seed + k``, so two checkpoints evaluated with the same
     arguments meet exactly the same starts. ``contexts`` adds reset contexts (e.g.
-    ``{"coef": 1.5}``). Returns the rates of :func:`summarize` plus ``level``, ``seed``,
-    ``checkpoint``, the run's ``alg`` and its training ``episodes_trained``.
+    ``{"coef": 1.5}``). ``envs`` arenas play at once (``env="remote"``: on a server at
+    ``port``, or a private one when None). Returns the rates of :func:`summarize` plus
+    ``level``, ``seed``, ``checkpoint``, the run's ``alg`` and its training
+    ``episodes_trained``.
     """
     if isinstance(level, str) and level not in LEVELS:
         raise ValueError(f"unknown level {level!r}; valid: {', '.join(LEVELS)}, 0, 1, 2")
@@ -136,10 +139,12 @@ def evaluate_checkpoint(
         raise ValueError(f"episodes must be ≥ 1, got {episodes}")
     payload = load_checkpoint(path)
     policy = load_policy(path)
-    worker = RolloutWorker(0, env, seed, port)
+    worker = RolloutWorker(0, env, seed, port, envs=min(envs, episodes))
     ctx = {**(contexts or {}), "level": level}
     try:
-        played = [worker.run_episode(policy, 0, 0.0, seed + k, ctx) for k in range(episodes)]
+        played = worker.run(
+            policy, 0, [Request(seed + k, 0.0, ctx, "eval") for k in range(episodes)]
+        )
     finally:
         worker.close()
     return {

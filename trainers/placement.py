@@ -2,16 +2,19 @@
 
 Three ways to give each rollout worker ``i`` its server (``env="remote"``):
 
-* ``servers="local"`` (the default): the worker's ``RM(port=base_port + i)`` launches its own
-  ``neuronsmae-server`` on the worker's node, bound to loopback, and stops it when the worker
-  goes. Sampling traffic never leaves the node, and a worker restarted on another node
-  brings its server along. Nothing in this module is needed for it.
+* ``servers="local"`` (the default): the worker's ``VecRM`` launches its own vector server
+  (``neuronsmae-server --arenas envs_per_worker``, unpaced) on the worker's node, bound to
+  loopback, on a free port (or on ``base_port + i`` when ``base_port`` is set, where a
+  running fleet is used), and stops it when the worker goes. Sampling traffic never leaves
+  the node, and a worker restarted on another node brings its server along. Nothing in
+  this module is needed for it.
 * ``servers="actors"``: one :class:`ServerActor` per worker index, placed by Ray (on nodes
-  with ``server_resources``), starts a server bound to its node's IP and reports host and
-  port; the worker connects with ``RM(host=..., port=..., launch=False)``. For clusters
-  where simulation and learning-side workers should sit on different machines.
-* ``router="tcp/H:7447"``: the servers are run outside Ray (``neuronsmae-serve --router``)
-  and every worker reaches server ``base_port + i`` through that Zenoh router.
+  with ``server_resources``), starts a vector server bound to its node's IP and reports
+  host and port; the worker connects with ``VecRM(host=..., port=..., launch=False)``. For
+  clusters where simulation and learning-side workers should sit on different machines.
+* ``router="tcp/H:7447"``: the servers are run outside Ray (``neuronsmae-serve --router
+  --arenas envs_per_worker``) and every worker reaches server ``base_port + i`` through
+  that Zenoh router.
 
 ``worker_resources`` (e.g. ``"sampler=1"``) makes each worker also require a custom resource,
 so workers land only on nodes started with ``ray start --resources '{"sampler": N}'``, at
@@ -29,7 +32,7 @@ from ray.exceptions import GetTimeoutError, RayError
 
 from neuronsmae.client import ping
 from neuronsmae.protocol.errors import ServerUnavailableError
-from neuronsmae.protocol.launch import ServerCommand, ServerProcess
+from neuronsmae.protocol.launch import ServerCommand, ServerProcess, free_port
 from neuronsmae.trainers.config import TrainConfig, parse_resources
 
 SERVER_STARTUP_S = 180.0
@@ -46,9 +49,12 @@ class ServerActor:
     pid, so it stops when the actor is killed.
     """
 
-    def __init__(self, port: int, seed: int, host: str = "", time_scale: float = 0.0) -> None:
+    def __init__(
+        self, port: int, seed: int, arenas: int = 1, host: str = "", time_scale: float = 0.0
+    ) -> None:
         self.host = host or ray.util.get_node_ip_address()
-        self.port, self.seed, self.time_scale = port, seed, time_scale
+        self.port = port or free_port(self.host)
+        self.seed, self.arenas, self.time_scale = seed, arenas, time_scale
         self.starts = 0
         self.server: ServerProcess | None = None
         self._start()
@@ -57,9 +63,10 @@ class ServerActor:
         """Launch (or relaunch) the server the same way ``RM`` launches a local one."""
         if self.server is not None:
             self.server.stop()
-        self.server = ServerProcess(
-            ServerCommand(self.port, self.seed, self.host, time_scale=self.time_scale)
+        command = ServerCommand(
+            self.port, self.seed, self.host, arenas=self.arenas, time_scale=self.time_scale
         )
+        self.server = ServerProcess(command)
         self.starts += 1
         self.server.wait_ready(self._answers, SERVER_STARTUP_S)
 
@@ -96,8 +103,10 @@ class ServerPool:
         base_seed: int,
         resources: Mapping[str, float] | None = None,
         host: str = "",
+        arenas: int = 1,
     ) -> None:
         self.base_port, self.base_seed, self.host = base_port, base_seed, host
+        self.arenas = arenas
         self.actor_cls = ray.remote(
             num_cpus=SERVER_CPUS, resources=dict(resources or {}), max_restarts=0
         )(ServerActor)
@@ -108,10 +117,12 @@ class ServerPool:
         )
 
     def _spawn(self, i: int) -> Any:
-        return self.actor_cls.remote(self.base_port + i, self.base_seed + i, self.host)
+        port = self.base_port + i if self.base_port else 0  # 0: a free port on its node
+        seed = self.base_seed + i * self.arenas
+        return self.actor_cls.remote(port, seed, self.arenas, self.host)
 
-    def env_options(self, i: int) -> dict[str, Any]:
-        """``RM`` options that point worker ``i`` at its server (restarted if it died)."""
+    def endpoint(self, i: int) -> tuple[str, int]:
+        """Host and port of worker ``i``'s server (restarted, or placed anew, if it died)."""
         try:
             host, port = ray.get(self.actors[i].address.remote(), timeout=SERVER_STARTUP_S)
         except (RayError, GetTimeoutError):  # the actor itself is gone: place a new one
@@ -119,7 +130,7 @@ class ServerPool:
             self.actors[i] = self._spawn(i)
             host, port = ray.get(self.actors[i].address.remote(), timeout=SERVER_STARTUP_S)
         self.addresses[i] = (host, port)
-        return {"host": host, "launch": False}
+        return host, port
 
     def close(self) -> None:
         """Stop every server and its actor."""
@@ -143,5 +154,6 @@ def sampler_placement(cfg: TrainConfig, n_workers: int, base_seed: int) -> dict[
             cfg.cluster.base_port,
             base_seed,
             parse_resources(cfg.cluster.server_resources),
+            arenas=cfg.envs_per_worker,
         )
     return out

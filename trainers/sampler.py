@@ -1,15 +1,22 @@
 """Ray sampling: rollout workers as actors, weights by the object store, fault tolerance.
 
-The learner puts the agent's weights into the object store once per update (``ray.put``)
-and every episode request carries that reference, so the weights travel once per update,
-not once per request. Finished episodes are collected with ``ray.wait``: the learner takes
-whatever has landed and never waits for the slowest worker (asynchronous mode), or it asks
-every worker for one episode and waits for them all (:meth:`Sampler.run`, the paper's
-synchronous loop and evaluation).
+Each worker plays its requests on ``envs`` arenas at once (:mod:`.rollout`); a Ray call
+hands it a *chunk* of episode requests and returns them all finished, so Ray's per-call
+cost is paid once per many environment steps. The learner puts the agent's weights into
+the object store once per update (``ray.put``) and every chunk carries that reference, so
+the weights travel once per update, not once per request. Finished chunks are collected
+with ``ray.wait``: the learner takes whatever has landed and never waits for the slowest
+worker (asynchronous mode), or it hands out a set of requests and waits for all of them
+(:meth:`Sampler.run`, the paper's synchronous loop and evaluation).
+
+Placement is checked up front: every worker must be up within ``start_timeout`` seconds or
+the sampler refuses at once with an error saying how many could not be placed, so a worker
+count that the cluster cannot hold never turns into a wait without end. Every wait takes a
+timeout.
 
 A worker whose env or process dies is killed and started again under the same index; the
-request it was serving is sent again to the new actor, and since a worker only returns
-*finished* episodes, the partial one is never seen. A worker that keeps failing is given up
+chunk it was serving is sent again to the new actor, and since a worker only returns
+*finished* episodes, partial ones are never seen. A worker that keeps failing is given up
 after ``max_failures`` consecutive failures; the run stops only when no worker is left.
 """
 
@@ -23,36 +30,31 @@ from dataclasses import dataclass
 from typing import Any
 
 import ray
-from ray.exceptions import RayError
+from ray.exceptions import GetTimeoutError, RayError
 
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.placement import ServerPool
-from neuronsmae.trainers.rollout import Policy, RolloutWorker
+from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
 
 log = logging.getLogger(__name__)
+
+START_TIMEOUT = 300.0
+"""Seconds every worker may take to come up (Ray placement, imports, its server's start)."""
 
 
 class NoWorkersLeftError(RuntimeError):
     """Every worker failed more often in a row than allowed."""
 
 
-@dataclass(frozen=True)
-class Request:
-    """One episode to play: which seed, at which ε, and what it is for."""
-
-    seed: int
-    """Reset seed of the episode."""
-    epsilon: float
-    """Exploration rate (0 for greedy evaluation)."""
-    kind: str = "train"
-    """``train`` (goes to the buffer) or ``eval`` (only counted)."""
+class PlacementError(RuntimeError):
+    """Some workers could not be placed on the Ray cluster, or did not start in time."""
 
 
 @dataclass
 class _Task:
     worker: int
     generation: int
-    request: Request
+    requests: list[Request]
 
 
 def _cause(err: BaseException) -> str:
@@ -62,7 +64,7 @@ def _cause(err: BaseException) -> str:
 
 
 class Sampler:
-    """A pool of ``RolloutWorker`` Ray actors, each owning its own environment."""
+    """A pool of ``RolloutWorker`` Ray actors, each owning ``envs_per_worker`` arenas."""
 
     def __init__(
         self,
@@ -70,16 +72,17 @@ class Sampler:
         *,
         env_kind: str,
         base_seed: int,
-        base_port: int,
-        contexts: Mapping[str, Any],
         worker_cpus: float,
+        envs_per_worker: int = 1,
+        base_port: int = 0,
         env_options: Mapping[str, Any] | None = None,
         max_failures: int = 5,
         pipeline: int = 2,
         worker_resources: Mapping[str, float] | None = None,
         servers: ServerPool | None = None,
+        start_timeout: float = START_TIMEOUT,
     ) -> None:
-        self.env_kind, self.contexts = env_kind, dict(contexts)
+        self.env_kind, self.envs = env_kind, envs_per_worker
         self.base_seed, self.base_port = base_seed, base_port
         self.env_options = dict(env_options or {})
         self.max_failures, self.pipeline = max_failures, pipeline
@@ -96,22 +99,44 @@ class Sampler:
         self.landed: list[Episode] = []
         self.weights_ref: Any = None
         self.version = -1
+        self._await_placement(start_timeout)
 
     def _spawn(self, i: int) -> Any:
         options = self.env_options
+        port = self.base_port + i if self.base_port else None  # None: a private server
         if self.servers is not None:  # point worker i at its (live) server actor
-            options = {**options, **self.servers.env_options(i)}
+            host, port = self.servers.endpoint(i)
+            options = {**options, "host": host, "launch": False}
         return self.actor_cls.remote(
-            i, self.env_kind, self.base_seed + i, self.base_port + i, options
+            i, self.env_kind, self.base_seed + i * self.envs, port, options, self.envs
         )
+
+    def _await_placement(self, timeout: float) -> None:
+        """Wait until every worker answers, or close them all and say what is missing."""
+        pings = {a.ping.remote(): i for i, a in enumerate(self.actors)}
+        ready, pending = ray.wait(list(pings), num_returns=len(pings), timeout=timeout)
+        try:
+            ray.get(ready, timeout=timeout)
+        except RayError as err:
+            self.close()
+            raise PlacementError(f"a rollout worker failed to start: {_cause(err)}") from err
+        if pending:
+            missing = sorted(pings[ref] for ref in pending)
+            self.close()
+            raise PlacementError(
+                f"{len(missing)} of {len(pings)} rollout workers could not be placed or did not "
+                f"start within {timeout:g} s (workers {missing[:10]}...); the cluster lacks the "
+                "resources they ask for (worker_cpus, worker_resources): lower --workers or "
+                f"cluster.worker_cpus, or add nodes. Ray sees {ray.available_resources()}"
+            )
 
     def env_info(self) -> dict[str, Any]:
         """``get_env_info()`` of the first live worker's environment."""
         while True:
             i = self._live()[0]
             try:
-                return ray.get(self.actors[i].env_info.remote())
-            except RayError as err:
+                return ray.get(self.actors[i].env_info.remote(), timeout=START_TIMEOUT)
+            except (RayError, GetTimeoutError) as err:
                 self._fail(i, self.generation[i], err)
 
     @property
@@ -126,37 +151,40 @@ class Sampler:
         return live
 
     def broadcast(self, policy: Policy) -> None:
-        """Put a new policy in the object store once; later requests pass its reference."""
+        """Put a new policy in the object store once; later chunks pass its reference."""
         self.weights_ref = ray.put(policy)
         self.version += 1
 
-    def submit(self, request: Request, worker: int | None = None) -> None:
-        """Queue one episode on a worker (the least loaded live one by default)."""
+    def submit(self, requests: Sequence[Request], worker: int | None = None) -> None:
+        """Queue one chunk of requests on a worker (the least loaded live one by default)."""
         live = self._live()
         if worker is None or self.actors[worker] is None:
             load = {i: 0 for i in live}
             for task in self.in_flight.values():
                 load[task.worker] = load.get(task.worker, 0) + 1
             worker = min(live, key=lambda i: load[i])
-        ref = self.actors[worker].run_episode.remote(
-            self.weights_ref, self.version, request.epsilon, request.seed, self.contexts
-        )
-        self.in_flight[ref] = _Task(worker, self.generation[worker], request)
+        actor = self.actors[worker]
+        assert actor is not None
+        ref = actor.run.remote(self.weights_ref, self.version, list(requests))
+        self.in_flight[ref] = _Task(worker, self.generation[worker], list(requests))
 
     def idle_slots(self) -> int:
-        """Requests that can be queued to keep ``pipeline`` per live worker in flight."""
+        """Chunks that can be queued to keep ``pipeline`` per live worker in flight."""
         return self.pipeline * self.n_live - len(self.in_flight)
 
     def wait(self, timeout: float | None = None, kind: str = "train") -> list[Episode]:
-        """Return the finished episodes of ``kind`` that landed, waiting for at least one."""
+        """The finished episodes of ``kind`` that landed, waiting at most ``timeout`` seconds
+        (None: until at least one chunk lands) for one chunk to land."""
+        deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             taken = [e for e in self.landed if e.info["kind"] == kind]
             if taken:
                 self.landed = [e for e in self.landed if e.info["kind"] != kind]
                 return taken
-            if not any(t.request.kind == kind for t in self.in_flight.values()):
+            if not any(r.kind == kind for t in self.in_flight.values() for r in t.requests):
                 return []
-            ready, _ = ray.wait(list(self.in_flight), num_returns=1, timeout=timeout)
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _ = ray.wait(list(self.in_flight), num_returns=1, timeout=left)
             if not ready:
                 return []
             for ref in ready:
@@ -165,26 +193,20 @@ class Sampler:
     def _harvest(self, ref: Any) -> None:
         task = self.in_flight.pop(ref)
         try:
-            episode: Episode = ray.get(ref)
+            episodes: list[Episode] = ray.get(ref)
         except RayError as err:
             self._fail(task.worker, task.generation, err)
-            self.submit(task.request, task.worker)  # the same episode again, on a fresh actor
+            self.submit(task.requests, task.worker)  # the same chunk again, on a fresh actor
             return
         self.failures[task.worker] = 0
-        episode.info["kind"] = task.request.kind
-        self.landed.append(episode)
+        self.landed.extend(episodes)
 
     def _fail(self, i: int, generation: int, err: BaseException) -> None:
         """Restart worker ``i`` (once per generation), or give it up after too many failures."""
         if generation != self.generation[i] or self.actors[i] is None:
             return  # another request already reported this actor's death
         self.failures[i] += 1
-        log.warning(
-            "rollout worker %d failed (%d in a row): %s",
-            i,
-            self.failures[i],
-            _cause(err),
-        )
+        log.warning("rollout worker %d failed (%d in a row): %s", i, self.failures[i], _cause(err))
         ray.kill(self.actors[i], no_restart=True)
         self.generation[i] += 1
         if self.failures[i] >= self.max_failures:
@@ -195,19 +217,30 @@ class Sampler:
         self.actors[i] = self._spawn(i)
         self.restarts += 1
 
-    def run(self, requests: Sequence[Request]) -> list[Episode]:
-        """Play all ``requests`` spread over the workers and wait for every one of them.
+    def run(self, requests: Sequence[Request], timeout: float | None = None) -> list[Episode]:
+        """Play all ``requests`` spread over the workers (consecutive shares) and wait for
+        them, at most ``timeout`` seconds (None: no limit); episodes in seed order.
 
         Episodes of other kinds that land meanwhile are kept for the next :meth:`wait`.
         """
-        kind = requests[0].kind if requests else "eval"
+        if not requests:
+            return []
+        kind = requests[0].kind
         live = self._live()
-        for j, request in enumerate(requests):
-            self.submit(request, live[j % len(live)])
+        per = -(-len(requests) // len(live))
+        for j, worker in enumerate(live):
+            share = list(requests[j * per : (j + 1) * per])
+            for start in range(0, len(share), self.envs * 4):  # chunks of a few episodes per arena
+                self.submit(share[start : start + self.envs * 4], worker)
+        deadline = None if timeout is None else time.monotonic() + timeout
         out: list[Episode] = []
         while len(out) < len(requests):
-            got = self.wait(kind=kind)
-            if not got and not any(t.request.kind == kind for t in self.in_flight.values()):
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                break
+            got = self.wait(left, kind=kind)
+            pending = any(r.kind == kind for t in self.in_flight.values() for r in t.requests)
+            if not got and not pending:
                 break
             out.extend(got)
         return sorted(out, key=lambda e: e.info["seed"])

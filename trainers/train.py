@@ -2,10 +2,10 @@
 
 Two loops share everything but the order of sampling and learning:
 
-* asynchronous (default): ``pipeline`` requests per worker stay queued; whenever episodes
-  land they go to the buffer, and every ``train_every`` episodes the learner runs
-  ``updates_per_round`` updates and broadcasts the new weights. Nobody waits for the
-  slowest worker.
+* asynchronous (default): ``pipeline`` chunks of requests (one episode per arena of the
+  worker) stay queued per worker; whenever episodes land they go to the buffer, and every
+  ``train_every`` episodes the learner runs ``updates_per_round`` updates and broadcasts
+  the new weights. Nobody waits for the slowest worker, and no wait outlasts the budget.
 * synchronous (``sync=True``, the paper's loop): each iteration asks every worker for one
   episode, waits for all, then learns.
 
@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import json
 import logging
+import math
+import os
 import random
 import time
 from collections import deque
@@ -47,10 +49,10 @@ from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
-from neuronsmae.trainers.placement import sampler_placement
+from neuronsmae.trainers.placement import SERVER_CPUS, sampler_placement
 from neuronsmae.trainers.records import Recorder
-from neuronsmae.trainers.rollout import Policy
-from neuronsmae.trainers.sampler import Request, Sampler
+from neuronsmae.trainers.rollout import Policy, Request
+from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
 
 TEST_SEED_OFFSET = 10_000_000
@@ -62,6 +64,17 @@ log = logging.getLogger(__name__)
 
 Hook = Callable[["Trainer"], None]
 """Called after every batch of landed episodes (tests use it to inject faults)."""
+
+
+def local_cpus(cfg: TrainConfig) -> int:
+    """CPUs to tell a local Ray it has: the machine's, or as many as the workers (and their
+    server actors) reserve plus one for the learner if that is more. Ray then places every
+    worker however few cores there are (they share them, oversubscribed), instead of
+    leaving some pending for ever."""
+    need = cfg.n_workers() * cfg.cluster.worker_cpus
+    if cfg.env == "remote" and cfg.cluster.servers == "actors":
+        need += cfg.n_workers() * SERVER_CPUS
+    return max(os.cpu_count() or 1, math.ceil(need) + 1)
 
 
 def train_seed(run_seed: int, k: int, eval_seed: int) -> int:
@@ -84,12 +97,15 @@ class Trainer:
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.torch_threads)
+        self.contexts: dict[str, Any] = {"level": cfg.level, "coef": cfg.coef}
+        """Every episode's reset contexts (the opponent bot and its damage coefficient)."""
         self.best: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
         """Acting weights of the best validation evaluation, and that evaluation's row."""
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             ray.init(
                 address=cfg.cluster.address or "local",  # never join a stray cluster by accident
+                num_cpus=None if cfg.cluster.address else local_cpus(cfg),
                 include_dashboard=False,
                 logging_level=logging.WARNING,
                 log_to_driver=False,
@@ -118,7 +134,7 @@ class Trainer:
             env_kind=cfg.env,
             base_seed=base_seed,
             base_port=cfg.cluster.base_port,
-            contexts={"level": cfg.level, "coef": cfg.coef},
+            envs_per_worker=cfg.envs_per_worker,
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
             **sampler_placement(cfg, n_workers, base_seed),
@@ -208,30 +224,41 @@ class Trainer:
 
     def _more(self) -> bool:
         """Episodes left to play and, in this session, wall-clock budget left."""
+        left = self._seconds_left()
+        return self.counters.episodes < self.cfg.episodes and (left is None or left > 0)
+
+    def _seconds_left(self) -> float | None:
+        """Wall-clock budget left in this session (None: no time budget)."""
         limit = self.cfg.max_minutes * 60.0
-        elapsed = time.perf_counter() - self.session_start
-        return self.counters.episodes < self.cfg.episodes and (limit <= 0 or elapsed < limit)
+        if limit <= 0:
+            return None
+        return limit - (time.perf_counter() - self.session_start)
 
     def _run_async(self) -> None:
-        issued = self.counters.episodes
+        cfg, issued = self.cfg, self.counters.episodes
         while self._more():
-            while self.sampler.idle_slots() > 0 and issued < self.cfg.episodes:
-                self.sampler.submit(self._request(issued))
-                issued += 1
-            self._absorb(self.sampler.wait())
+            while self.sampler.idle_slots() > 0 and issued < cfg.episodes:
+                n = min(cfg.envs_per_worker, cfg.episodes - issued)  # one per arena
+                self.sampler.submit([self._request(issued + j) for j in range(n)])
+                issued += n
+            left = self._seconds_left()
+            self._absorb(self.sampler.wait(timeout=None if left is None else max(left, 0.0)))
 
     def _run_sync(self) -> None:
         while self._more():
             k = self.counters.episodes
             n = min(self.sampler.n_live, self.cfg.episodes - k)
-            self._absorb(self.sampler.run([self._request(k + j) for j in range(n)]))
+            self._absorb(
+                self.sampler.run([self._request(k + j) for j in range(n)], self._seconds_left())
+            )
 
     def _request(self, k: int) -> Request:
         cfg = self.cfg
         eps = epsilon_at(
             k, cfg.learner.eps_start, cfg.learner.eps_end, cfg.learner.eps_anneal_episodes
         )
-        return Request(self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed)), eps)
+        seed = self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed))
+        return Request(seed, eps, self.contexts)
 
     def _absorb(self, episodes: list[Episode]) -> None:
         """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
@@ -318,7 +345,7 @@ class Trainer:
         first = cfg.eval.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
         evaluated = policy or self._policy()
         self.sampler.broadcast(evaluated)
-        requests = [Request(first + k, 0.0, "eval") for k in range(n)]
+        requests = [Request(first + k, 0.0, self.contexts, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
         self.sampler.broadcast(self._policy())
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start

@@ -1,4 +1,5 @@
-"""A rollout worker on the real in-process arena: whole episodes, and nothing on failure."""
+"""Rollout workers on real in-process arenas: whole episodes, batched play equal to playing
+one arena at a time, and nothing on failure."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.trainers.buffer import EpisodeReplayBuffer
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
-from neuronsmae.trainers.rollout import Policy, RolloutWorker
+from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
 
 
 class EnvFailure(RuntimeError):
@@ -24,11 +25,11 @@ class FailingStep:
     def __init__(self, env: Any, fail_at: int) -> None:
         self.env, self.fail_at, self.steps = env, fail_at, 0
 
-    def step(self, actions: Any) -> Any:
+    def step(self, actions: Any, **kwargs: Any) -> Any:
         self.steps += 1
         if self.steps == self.fail_at:
             raise EnvFailure("env server died")
-        return self.env.step(actions)
+        return self.env.step(actions, **kwargs)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.env, name)
@@ -80,3 +81,44 @@ def test_env_failure_mid_episode_returns_nothing(worker: RolloutWorker) -> None:
             worker.run_episode(policy, 0, 0.2, seed=4, contexts={"level": "easy"})
     finally:
         worker.env = real
+
+
+def test_a_batched_worker_plays_each_request_as_one_arena_would(worker: RolloutWorker) -> None:
+    """Three arenas, seven requests (so arenas take several in turn and one waits idle at
+    the end): each greedy episode equals the one-arena worker's for the same request."""
+    policy, _ = _policy(worker)
+    batched = RolloutWorker(1, "inprocess", env_seed=50, port=None, envs=3)
+    try:
+        requests = [
+            Request(100 + k, 0.0, {"level": ["easy", "middle", 1][k % 3], "coef": 0.5 + k / 10})
+            for k in range(7)
+        ]
+        episodes = batched.run(policy, 7, requests)  # a version the shared worker never saw
+        assert [e.info["seed"] for e in episodes] == [r.seed for r in requests]
+        for request, got in zip(requests, episodes, strict=True):
+            want = worker.run_episode(policy, 7, 0.0, request.seed, request.contexts)
+            assert got.info["contexts"] == dict(request.contexts)
+            assert np.array_equal(got.actions, want.actions)
+            assert np.array_equal(got.rewards, want.rewards)
+            assert np.array_equal(got.obs, want.obs) and np.array_equal(got.state, want.state)
+            assert np.array_equal(got.avail, want.avail) and np.array_equal(got.alive, want.alive)
+            assert got.info["winner"] == want.info["winner"]
+    finally:
+        batched.close()
+
+
+def test_exploring_episodes_are_whole_and_keep_their_own_epsilon() -> None:
+    worker = RolloutWorker(2, "inprocess", env_seed=60, port=None, envs=4)
+    try:
+        policy, env = _policy(worker)
+        requests = [Request(200 + k, [0.0, 1.0][k % 2], {"level": "easy"}) for k in range(6)]
+        episodes = worker.run(policy, 0, requests)
+        buf = EpisodeReplayBuffer(
+            8, env.n_agents, env.obs_dim, env.state_dim, env.n_actions, env.episode_limit
+        )
+        for request, episode in zip(requests, episodes, strict=True):
+            buf.add(episode)  # validates every row: none half-played
+            assert episode.info["epsilon"] == request.epsilon and episode.terminated
+        assert worker.run(policy, 0, []) == []
+    finally:
+        worker.close()
