@@ -33,16 +33,12 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from neuronsmae.protocol import env_info
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
 
 PHYSICS_HZ = 50
 """Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
-MOTION_HIGH = np.array(env_info.MOTION_HIGH, dtype=np.float32)
-MOTION_LOW = -MOTION_HIGH
-"""Bounds of (vx, vy, omega) of a continuous action, as the arena validates them."""
 ACTION_MASK = "action_mask"
 TARGET_MASK = "target_mask"
 
@@ -183,8 +179,9 @@ class Layout:
 
     def motion_box(self, n_agents: int | None = None) -> spaces.Box:
         """Continuous actions: ``(vx, vy, omega, target)`` per row, see the module docstring."""
-        low = np.append(MOTION_LOW, np.float32(0.0))
-        high = np.append(MOTION_HIGH, np.float32(self.n_enemies))
+        lower, upper = self.info.motion_bounds  # (vx, vy, omega) as the arena checks them
+        low = np.array([*lower, 0.0], dtype=np.float32)
+        high = np.array([*upper, self.n_enemies], dtype=np.float32)
         if n_agents is not None:
             low, high = np.tile(low, (n_agents, 1)), np.tile(high, (n_agents, 1))
         return spaces.Box(low, high, dtype=np.float32)
