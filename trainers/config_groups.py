@@ -99,8 +99,8 @@ class LearnerConfig:
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
     that scores each action from its enemy's and point's features; needs 'relative'). On the
-    easy bot it roughly doubles the greedy win rate after 500 episodes (measured: ``python
-    bench/bench_learning.py --episodes 500 --set head=flat`` against the defaults)."""
+    easy bot it roughly doubles the greedy win rate after 500 episodes (measured with
+    ``bench/bench_learning.py``, against ``--set head=flat``)."""
     augment: str = "enemies,field,allies"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
     every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
