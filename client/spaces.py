@@ -33,12 +33,17 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from neuronsmae.protocol import env_info
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
 
 PHYSICS_HZ = 50
 """Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
+MOTION_HIGH = np.array(env_info.MOTION_HIGH, dtype=np.float32)
+MOTION_LOW = -MOTION_HIGH
+"""Bounds of (vx, vy, omega) of a continuous action, as the arena validates them (float32;
+``EnvInfo.motion_bounds`` gives the same as floats)."""
 ACTION_MASK = "action_mask"
 TARGET_MASK = "target_mask"
 
