@@ -42,7 +42,8 @@ PHYSICS_HZ = 50
 """Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
 MOTION_HIGH = np.array(env_info.MOTION_HIGH, dtype=np.float32)
 MOTION_LOW = -MOTION_HIGH
-"""Bounds of (vx, vy, omega) of a continuous action, as the arena validates them."""
+"""Bounds of (vx, vy, omega) of a continuous action, as the arena validates them (float32;
+``EnvInfo.motion_bounds`` gives the same as floats)."""
 ACTION_MASK = "action_mask"
 TARGET_MASK = "target_mask"
 
@@ -183,8 +184,9 @@ class Layout:
 
     def motion_box(self, n_agents: int | None = None) -> spaces.Box:
         """Continuous actions: ``(vx, vy, omega, target)`` per row, see the module docstring."""
-        low = np.append(MOTION_LOW, np.float32(0.0))
-        high = np.append(MOTION_HIGH, np.float32(self.n_enemies))
+        lower, upper = self.info.motion_bounds  # (vx, vy, omega) as the arena checks them
+        low = np.array([*lower, 0.0], dtype=np.float32)
+        high = np.array([*upper, self.n_enemies], dtype=np.float32)
         if n_agents is not None:
             low, high = np.tile(low, (n_agents, 1)), np.tile(high, (n_agents, 1))
         return spaces.Box(low, high, dtype=np.float32)

@@ -274,6 +274,12 @@ class EnvInfo:
         return self.action_space == "continuous"
 
     @property
+    def motion_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Lower and upper bounds of a continuous action's ``(vx, vy, omega)``; its fourth
+        value, the target, is an enemy index in ``[0, n_enemies)``."""
+        return tuple(-v for v in MOTION_HIGH), MOTION_HIGH
+
+    @property
     def actions_per_enemy(self) -> int:
         """Choices per target enemy: ``k`` points (abstract), 5 moves (discrete), 1."""
         return self.n_actions // self.n_enemies

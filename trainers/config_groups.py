@@ -60,8 +60,9 @@ class LearnerConfig:
     """The algorithm's hyper-parameters: optimiser, exploration, networks, replay."""
 
     lr: float = 5e-4
-    """Adam learning rate, > 0 (paper: 5e-4). 1e-3 reaches 0.8 against the easy bot sooner
-    but stays there; 5e-4 climbs higher (docs/results.md)."""
+    """Adam learning rate, > 0 (paper: 5e-4). Measured against the easy bot: 1e-3 reaches
+    0.8 sooner but stays there, 5e-4 climbs higher (``python bench/bench_learning.py --set
+    lr=1e-3`` against the defaults)."""
     gamma: float = 0.99
     """Discount in [0, 1] (paper: 0.99)."""
     eps_start: float = 0.2
@@ -73,7 +74,8 @@ class LearnerConfig:
     target_update_interval: int = 100
     """Gradient updates between hard target refreshes, ≥ 1 (100 = every 50 episodes at the
     default 2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100
-    episodes). Refreshing every 10 episodes kept the greedy win rate oscillating."""
+    episodes). Measured: refreshing every 10 episodes (``--set target_update_interval=20``)
+    kept the greedy win rate oscillating."""
     grad_clip: float = 10.0
     """Gradient-norm clip (paper: 10)."""
     agent_hidden: int = 128
@@ -97,8 +99,8 @@ class LearnerConfig:
     head: str = "points"
     """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
     that scores each action from its enemy's and point's features; needs 'relative'). On the
-    easy bot it roughly doubles the greedy win rate after 500 episodes (measured: ``python
-    bench/bench_learning.py --episodes 500 --set head=flat`` against the defaults)."""
+    easy bot it roughly doubles the greedy win rate after 500 episodes (measured with
+    ``bench/bench_learning.py``, against ``--set head=flat``)."""
     augment: str = "enemies,field,allies"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
     every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the

@@ -9,9 +9,8 @@ seen from each enemy's heading, and for each candidate point the direction it li
 seen from its enemy, relative to that enemy's heading (which armour plate faces it: rear
 plates take 3× damage). Everything is a fixed function of the observation, so the policy
 stays decentralised and observation-based; it only spares the learner from re-deriving
-trigonometry, which is what lets it learn within a laptop's half hour (measured:
-``python bench/bench_learning.py --minutes 10 --set features=raw --set head=flat`` against
-the defaults).
+trigonometry, which is what lets it learn within a laptop's half hour (measured with
+``bench/bench_learning.py``, against ``--set features=raw --set head=flat``).
 
 Columns are read from the observation's layout (:class:`~neuronsmae.protocol.EnvInfo`), so
 ``relative`` fits any team sizes and ``k`` as long as the observation holds the poses and

@@ -3,17 +3,26 @@
 CSV is the durable record (``train.csv`` every logged round, ``eval.csv`` every greedy
 evaluation; a resumed run appends), TensorBoard the convenient one, and tqdm shows a person
 watching the run what it is doing now: episodes, env steps/s, win rate and loss.
+
+A run has two budgets, its episodes and this session's minutes, and stops at whichever runs
+out first; the bar shows progress and the time left against that one and names it
+(:func:`budget_status`), so a 30-minute run on a small machine does not show an hour's
+ETA toward 30,000 episodes it will never play.
 """
 
 from __future__ import annotations
 
 import csv
+import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
+PERMILLE = 1000
+"""The bar's resolution: thousandths of the binding budget."""
 TRAIN_COLUMNS = (
     "episodes",
     "env_steps",
@@ -47,6 +56,47 @@ EVAL_COLUMNS = (
 (periodic) or ``test`` (final); ``weights`` is ``latest`` or ``best`` (see ``keep_best``)."""
 
 
+@dataclass(frozen=True)
+class BudgetStatus:
+    """How far the run is along the budget that will end it."""
+
+    binding: str
+    """``episodes`` or ``time``: the budget that runs out first at the current pace."""
+    fraction: float
+    """Share of that budget spent, in [0, 1]."""
+    eta_seconds: float
+    """Seconds until it runs out (``inf`` while the pace is unknown and time is unlimited)."""
+
+
+def budget_status(
+    episodes: int, total: int, first: int, elapsed: float, limit: float
+) -> BudgetStatus:
+    """The binding budget of a session that started at episode ``first`` and has played up
+    to ``episodes`` of ``total`` in ``elapsed`` seconds of its ``limit`` (0: no time limit).
+
+    The episode budget ends after the episodes left at this session's pace; the time budget
+    after the seconds left. Before the first episode lands the pace is unknown, and a time
+    limit, when there is one, is taken to bind.
+    """
+    rate = (episodes - first) / elapsed if elapsed > 0 else 0.0
+    episodes_eta = (total - episodes) / rate if rate > 0 else math.inf
+    time_eta = max(limit - elapsed, 0.0) if limit > 0 else math.inf
+    if limit > 0 and time_eta <= episodes_eta:
+        return BudgetStatus("time", min(elapsed / limit, 1.0), time_eta)
+    return BudgetStatus("episodes", min(episodes / total, 1.0), episodes_eta)
+
+
+def _clock(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    minutes, secs = divmod(int(seconds), 60)
+    return (
+        f"{minutes // 60}:{minutes % 60:02d}:{secs:02d}"
+        if minutes >= 60
+        else f"{minutes}:{secs:02d}"
+    )
+
+
 class _Csv:
     """Append rows to a CSV file, writing the header only when the file is new."""
 
@@ -69,21 +119,27 @@ class Recorder:
     """Writes train and eval rows to CSV and TensorBoard and drives the progress bar."""
 
     def __init__(
-        self, run_dir: Path, total_episodes: int, done_episodes: int, progress: bool
+        self,
+        run_dir: Path,
+        total_episodes: int,
+        done_episodes: int,
+        progress: bool,
+        max_seconds: float = 0.0,
     ) -> None:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.train_csv = _Csv(run_dir / "train.csv", TRAIN_COLUMNS)
         self.eval_csv = _Csv(run_dir / "eval.csv", EVAL_COLUMNS)
         self.tb = SummaryWriter(str(run_dir / "tb"))
+        self.total, self.first, self.episodes = total_episodes, done_episodes, done_episodes
+        self.max_seconds = max_seconds
         self.bar = tqdm(
-            total=total_episodes,
-            initial=done_episodes,
-            unit="ep",
+            total=PERMILLE,
+            bar_format="{percentage:3.0f}%|{bar}| {desc}{postfix}",
             disable=not progress,
             dynamic_ncols=True,
-            smoothing=0.05,
         )
         self.last_eval: float | None = None
+        self.advance(0, 0.0)
 
     def train(self, row: dict[str, Any]) -> None:
         """Record a training row and refresh the bar's figures."""
@@ -116,9 +172,19 @@ class Recorder:
             f"(return {row['mean_return']:.1f})"
         )
 
-    def advance(self, n: int) -> None:
-        """Move the bar by ``n`` finished episodes."""
-        self.bar.update(n)
+    def advance(self, n: int, elapsed: float) -> None:
+        """Count ``n`` more finished episodes, ``elapsed`` seconds into the session, and move
+        the bar along the binding budget."""
+        self.episodes += n
+        status = budget_status(self.episodes, self.total, self.first, elapsed, self.max_seconds)
+        spent = f"{self.episodes:,}/{self.total:,} ep"
+        if self.max_seconds > 0:
+            spent += f", {_clock(elapsed)}/{_clock(self.max_seconds)}"
+        self.bar.set_description_str(
+            f"{spent} ({status.binding} budget binds, ETA {_clock(status.eta_seconds)})",
+            refresh=False,
+        )
+        self.bar.update(round(status.fraction * PERMILLE) - self.bar.n)
 
     def _postfix(self, row: dict[str, Any]) -> None:
         fig = {"sps": f"{row['env_steps_per_s']:.0f}", "win": f"{row['train_win_rate']:.2f}"}

@@ -1,17 +1,17 @@
-"""Symmetries of the abstract 2 v 2 task, for replaying episodes in an equivalent form.
+"""Symmetries of the cooperative task, for replaying episodes in an equivalent form.
 
 Three relabellings leave the cooperative task unchanged, so a stored episode stays a
 valid episode after any of them:
 
 * ``enemies`` swaps the two enemy slots. The bots choose by position (nearest robot,
   nearest point), not by index, so the enemy called 0 could as well have been called 1
-  (up to ties); actions ``4j + k`` become ``4(1 − j) + k``.
+  (up to ties); the action ``(enemy j, choice c)`` becomes ``(enemy 1 − j, choice c)``.
 * ``field`` turns the whole scene half a turn about the field's centre. The layout is
-  centrally symmetric (``docs/reference.md``, "Arena"; the obstacles to within 2 cm, the spawn
-  ranges to within 12 cm), and so are the physics and the bots: every position ``(x, y)``
-  becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The ``relative``
-  features are built from differences of positions and of angles, so they do not change at
-  all.
+  centrally symmetric (``docs/reference.md``, "Arena"; the obstacles to within 2 cm, the
+  spawn ranges to within 12 cm), and so are the physics and the bots: every position
+  ``(x, y)`` becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The
+  ``relative`` features are built from differences of positions and of angles, so they do
+  not change at all.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.

@@ -197,7 +197,9 @@ class Trainer:
     def run(self) -> dict[str, Any]:
         """Train until ``cfg.episodes``, then evaluate greedily; return the final figures."""
         cfg = self.cfg
-        self.recorder = Recorder(self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress)
+        self.recorder = Recorder(
+            self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress, cfg.max_minutes * 60
+        )
         self.session_start = time.perf_counter()
         self.session_steps = 0
         self.wall_base = self.counters.wall_seconds
@@ -282,7 +284,7 @@ class Trainer:
                 self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
-        self.recorder.advance(c.episodes - before)
+        self.recorder.advance(c.episodes - before, time.perf_counter() - self.session_start)
         if rounds:
             self.recorder.train(self._train_row())
         # No periodic evaluation once the budget (episodes or minutes) is spent: the final

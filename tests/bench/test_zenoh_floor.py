@@ -8,6 +8,7 @@ from bench.bench_transport import bound
 from bench.zenoh_floor import measure
 
 
+@pytest.mark.slow
 def test_both_floors_are_measured_against_real_echo_servers() -> None:
     rows = measure(pings=30)
     assert [row["path"] for row in rows] == [

@@ -150,6 +150,7 @@ def test_bad_launch_settings_are_refused_before_anything_starts(
         ping(port, timeout=0.5)
 
 
+@pytest.mark.slow
 def test_the_server_refuses_a_bad_busy_poll() -> None:
     cmd = [sys.executable, "-m", "neuronsmae.server", "--port", str(free_port())]
     done = subprocess.run([*cmd, "--busy-poll", "-5"], capture_output=True, text=True, timeout=60)
@@ -349,6 +350,7 @@ def test_port_in_use_fails_clearly(server_a: Server) -> None:
     assert f"port {server_a.port} on 127.0.0.1 is already in use" in done.stderr
 
 
+@pytest.mark.slow
 def test_launch_paces_then_stops_its_server() -> None:
     port = free_port()
     with pytest.raises(ServerUnavailableError, match="launch=False"):
@@ -380,6 +382,7 @@ sys.stdin.read()  # wait to be killed
 """
 
 
+@pytest.mark.slow
 def test_launched_server_exits_when_its_client_is_killed() -> None:
     port = free_port()
     client = subprocess.Popen(

@@ -86,6 +86,7 @@ def test_an_arena_it_cannot_rebuild_must_be_described(tmp_path: Path) -> None:
     Recorder(Opaque(), tmp_path, arena_seed=0, options={}).close()  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 def test_episode_recorded_through_rm_replays_in_process(tmp_path: Path) -> None:
     # A launched server with graphics "on": the arena renders headless either way, and the
     # frame crosses the wire as the same uint8 array the replay draws in process.

@@ -130,6 +130,7 @@ def test_tls_router_configs_require_client_certificates(name: str) -> None:
         assert _json(conf, "access_control/default_permission") == "deny"
 
 
+@pytest.mark.slow
 def test_router_warns_when_it_listens_beyond_loopback(tmp_path: Path) -> None:
     log = tmp_path / "router.log"
     port = free_port()

@@ -159,6 +159,7 @@ def test_client_without_the_right_certificate_is_refused(routed: str, pki: Pki, 
         _session("client", endpoint.replace("tls/", f"{proto}/"), who, ca)
 
 
+@pytest.mark.slow
 def test_acl_gives_an_unlisted_certificate_nothing(pki: Pki) -> None:
     with _behind_router("zenoh-router-acl.json5", pki) as endpoint:
         _check_acl(endpoint, pki)
@@ -204,6 +205,7 @@ def _rm_through(endpoint: str, port: int, patience: float = 30.0) -> RM:
             time.sleep(0.2)
 
 
+@pytest.mark.slow
 def test_real_server_and_client_through_the_acl_router(
     pki: Pki, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

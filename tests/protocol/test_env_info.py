@@ -41,6 +41,7 @@ def test_the_released_37_value_layout_by_name() -> None:
     state = info.state
     assert state.pose(2) == (10, 11, 12) and state.hp_of(1) == 8 and state.time == 20
     assert info.action(1, 2) == 6 and info.split(6) == (1, 2) and info.actions_per_enemy == 4
+    assert info.motion_bounds == ((-2.0, -2.0, -1.75), (2.0, 2.0, 1.75))
 
 
 def test_unknown_keys_are_ignored_and_agents_become_a_tuple() -> None:

@@ -1,0 +1,21 @@
+"""Test tiers: tests that start servers, routers, Ray or a training run are marked ``slow``.
+
+``python -m pytest -q -m "not slow"`` is the quick tier for the edit–test loop; CI runs
+everything. A test is marked here by the fixtures it uses (:data:`SLOW_FIXTURES`, directly
+or through other fixtures) or by the ``ray`` mark; tests that launch processes on their own
+carry ``@pytest.mark.slow`` where they are written.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+SLOW_FIXTURES = frozenset({"start_server", "spawn", "routed", "local_ray", "loopback_ray"})
+"""Fixtures that start server or router processes, or Ray."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if fixtures & SLOW_FIXTURES or item.get_closest_marker("ray") is not None:
+            item.add_marker(pytest.mark.slow)

@@ -1,0 +1,53 @@
+"""The progress bar follows whichever budget, episodes or minutes, ends the run."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from neuronsmae.trainers.records import Recorder, budget_status
+
+
+def test_the_wall_clock_binds_a_slow_run() -> None:
+    # 30-minute budget, 10 minutes in, 2,000 of 30,000 episodes: 28,000 more would take
+    # 140 minutes at this pace, the clock runs out in 20.
+    status = budget_status(2_000, 30_000, 0, 600.0, 1800.0)
+    assert status.binding == "time"
+    assert status.fraction == pytest.approx(1 / 3)
+    assert status.eta_seconds == pytest.approx(1200.0)
+
+
+def test_the_episodes_bind_a_fast_run() -> None:
+    # 1,000 episodes budget, 900 played in 60 s of a 30-minute budget: 7 s to go.
+    status = budget_status(900, 1_000, 0, 60.0, 1800.0)
+    assert status.binding == "episodes"
+    assert status.fraction == pytest.approx(0.9)
+    assert status.eta_seconds == pytest.approx(100 / 15)
+
+
+def test_without_a_time_limit_the_episodes_bind() -> None:
+    status = budget_status(50, 200, 0, 10.0, 0.0)
+    assert (status.binding, status.fraction, status.eta_seconds) == ("episodes", 0.25, 30.0)
+    unknown = budget_status(0, 200, 0, 0.0, 0.0)  # nothing has landed yet: no pace
+    assert unknown.binding == "episodes" and math.isinf(unknown.eta_seconds)
+
+
+def test_a_resumed_run_paces_on_this_session_only() -> None:
+    # resumed at 10,000 of 12,000; 1,000 more in 100 s: 200 s left, under the 1,800 s left.
+    status = budget_status(11_000, 12_000, 10_000, 100.0, 1900.0)
+    assert status.binding == "episodes" and status.eta_seconds == pytest.approx(100.0)
+    assert budget_status(10_000, 12_000, 10_000, 0.0, 1900.0).binding == "time"
+
+
+def test_the_bar_names_the_binding_budget(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recorder = Recorder(tmp_path, 30_000, 0, progress=True, max_seconds=1800.0)
+    recorder.bar.mininterval = 0.0
+    recorder.advance(2_000, 600.0)
+    assert recorder.bar.n == 333
+    assert "2,000/30,000 ep, 10:00/30:00 (time budget binds, ETA 20:00)" in recorder.bar.desc
+    recorder.close()
+    assert "time budget binds" in capsys.readouterr().err
