@@ -240,7 +240,9 @@ class Trainer:
         cfg, issued = self.cfg, self.counters.episodes
         while self._more():
             while self.sampler.idle_slots() > 0 and issued < cfg.episodes:
-                n = min(cfg.envs_per_worker, cfg.episodes - issued)  # one per arena
+                # One episode per arena; near the end of the budget, shared among workers.
+                share = -(-(cfg.episodes - issued) // self.sampler.n_live)
+                n = min(cfg.envs_per_worker, share)
                 self.sampler.submit([self._request(issued + j) for j in range(n)])
                 issued += n
             left = self._seconds_left()

@@ -21,7 +21,7 @@ from neuronsmae.trainers.buffer import Batch, Episode
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
-from neuronsmae.trainers.sampler import Request
+from neuronsmae.trainers.rollout import Request
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
@@ -36,6 +36,7 @@ TINY = [
     "hypernet_hidden=8",
     "mixer_embed=8",
     "train_every=1",
+    "envs_per_worker=2",  # chunks of two episodes: evaluations fall due between them
 ]
 
 
