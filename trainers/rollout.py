@@ -261,6 +261,13 @@ class RolloutWorker:
             last = actions
         return [episode for episode in out if episode is not None]
 
+    def check_contexts(self, sets: Sequence[Mapping[str, Any]]) -> None:
+        """Reset the arenas with each context set in turn (the arena raises
+        ``InvalidContextError`` for a key or value it refuses); the next :meth:`run` resets
+        them again."""
+        for contexts in sets:
+            self.env.reset(dict(contexts))
+
     def ping(self) -> int:
         """Answer once ``__init__`` has finished (the env is open)."""
         return self.index

@@ -32,6 +32,7 @@ from typing import Any
 import ray
 from ray.exceptions import GetTimeoutError, RayError
 
+from neuronsmae.protocol import InvalidContextError
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.placement import ServerPool
 from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
@@ -138,6 +139,18 @@ class Sampler:
                 return ray.get(self.actors[i].env_info.remote(), timeout=START_TIMEOUT)
             except (RayError, GetTimeoutError) as err:
                 self._fail(i, self.generation[i], err)
+
+    def check_contexts(self, sets: Sequence[Mapping[str, Any]]) -> None:
+        """Have the first live worker's arenas reset with each context set; the arena's
+        ``InvalidContextError`` (naming the key and what is valid) comes back as is."""
+        i = self._live()[0]
+        try:
+            ray.get(self.actors[i].check_contexts.remote(list(sets)), timeout=START_TIMEOUT)
+        except RayError as err:
+            cause = getattr(err, "cause", None)
+            if isinstance(cause, InvalidContextError):
+                raise cause from None
+            raise
 
     @property
     def n_live(self) -> int:
