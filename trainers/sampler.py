@@ -58,6 +58,23 @@ class _Task:
     requests: list[Request]
 
 
+def check_capacity(need: Mapping[str, float], n_workers: int) -> None:
+    """Refuse at once a worker count the Ray cluster can never hold: ``need`` (resource →
+    total amount the workers ask for) beyond the cluster's totals. Resources other runs
+    hold for a while are waited for instead (see ``start_timeout``)."""
+    total = ray.cluster_resources()
+    short = {k: (v, total.get(k, 0.0)) for k, v in need.items() if total.get(k, 0.0) < v - 1e-9}
+    if short:
+        said = ", ".join(
+            f"{k}: {v:g} needed, {have:g} in the cluster" for k, (v, have) in short.items()
+        )
+        raise PlacementError(
+            f"{n_workers} rollout workers cannot be placed ({said}): lower --workers or "
+            "cluster.worker_cpus / cluster.worker_resources, or add nodes (a local Ray "
+            "started by the trainer is sized for its workers)"
+        )
+
+
 def _cause(err: BaseException) -> str:
     """The root error of a Ray failure: the last line of its remote traceback."""
     lines = [line.strip() for line in str(err).splitlines() if line.strip()]
@@ -90,6 +107,9 @@ class Sampler:
         self.max_failures, self.pipeline = max_failures, pipeline
         self.servers = servers
         """Server actors the workers connect to (None: each worker's env finds its own)."""
+        need = {"CPU": n_workers * worker_cpus}
+        need.update({k: n_workers * v for k, v in (worker_resources or {}).items()})
+        check_capacity(need, n_workers)
         self.actor_cls = ray.remote(
             num_cpus=worker_cpus, resources=dict(worker_resources or {}), max_restarts=0
         )(RolloutWorker)

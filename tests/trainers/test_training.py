@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from neuronsmae.trainers.config import ConfigError, make_config, preset
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
 from neuronsmae.trainers.rollout import Request
+from neuronsmae.trainers.sampler import PlacementError
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
@@ -313,3 +315,17 @@ def test_contexts_the_arena_refuses_stop_the_run_before_it_starts(tmp_path: Path
     )
     with pytest.raises(ConfigError, match="coef"):
         Trainer(cfg)
+
+
+def test_a_worker_count_the_cluster_cannot_hold_is_refused_at_once(tmp_path: Path) -> None:
+    """This module's Ray has 2 CPUs: ten half-CPU workers can never be placed."""
+    cfg = make_config(
+        dict(kv.split("=") for kv in TINY),
+        {"workers": 10, "episodes": 4, "out": str(tmp_path), "env": "inprocess"},
+    )
+    start = time.monotonic()
+    with pytest.raises(
+        PlacementError, match=r"10 rollout workers cannot be placed \(CPU: 5 needed"
+    ):
+        Trainer(cfg)
+    assert time.monotonic() - start < 30
