@@ -1,8 +1,14 @@
-"""Helpers shared by the trainer tests: synthetic episodes for buffer and learner checks."""
+"""Helpers shared by the trainer tests: synthetic episodes for buffer and learner checks, and
+the loopback switch the local multi-node Ray clusters need."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
+import pytest
+import ray
+from ray._private import ray_constants
 
 from neuronsmae.trainers.buffer import Episode
 
@@ -29,3 +35,21 @@ def make_episode(
         rewards=rng.standard_normal(length).astype(np.float32),
         terminated=terminated,
     )
+
+
+@pytest.fixture(scope="module")
+def loopback_ray() -> Iterator[None]:
+    """Keep every Ray address on 127.0.0.1.
+
+    Ray rewrites a loopback address to the machine's outward IP (``resolve_ip_for_localhost``)
+    unless "clusters" are off; the switch is read once at import, so it is patched here
+    and set in the environment for the processes the cluster starts. The cluster is also
+    kept out of ``/tmp/ray/ray_current_cluster``: a plain ``ray.init()`` elsewhere on the
+    machine would join it while it runs (and its shutdown would delete another's entry).
+    """
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(ray_constants.ENABLE_RAY_CLUSTERS_ENV_VAR, "0")
+        mp.setattr(ray_constants, "ENABLE_RAY_CLUSTER", False)
+        mp.setattr(ray._private.utils, "write_ray_address", lambda *a, **k: None)
+        mp.setattr(ray._common.utils, "reset_ray_address", lambda *a, **k: None)
+        yield

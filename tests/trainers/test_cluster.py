@@ -17,7 +17,6 @@ from typing import Any
 
 import pytest
 import ray
-from ray._private import ray_constants
 from ray.cluster_utils import Cluster
 
 from neuronsmae.trainers.config import ConfigError, make_config, parse_resources
@@ -42,24 +41,6 @@ TINY = {
     "progress": False,
 }
 NODE = {"node_ip_address": "127.0.0.1", "object_store_memory": 80 * 1024 * 1024}
-
-
-@pytest.fixture(scope="module")
-def loopback_ray() -> Iterator[None]:
-    """Keep every Ray address on 127.0.0.1.
-
-    Ray rewrites a loopback address to the machine's outward IP (``resolve_ip_for_localhost``)
-    unless "clusters" are off; the switch is read once at import, so it is patched here
-    and set in the environment for the processes the cluster starts. The cluster is also
-    kept out of ``/tmp/ray/ray_current_cluster``: a plain ``ray.init()`` elsewhere on the
-    machine would join it while it runs (and its shutdown would delete another's entry).
-    """
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(ray_constants.ENABLE_RAY_CLUSTERS_ENV_VAR, "0")
-        mp.setattr(ray_constants, "ENABLE_RAY_CLUSTER", False)
-        mp.setattr(ray._private.utils, "write_ray_address", lambda *a, **k: None)
-        mp.setattr(ray._common.utils, "reset_ray_address", lambda *a, **k: None)
-        yield
 
 
 @pytest.fixture(scope="module")
