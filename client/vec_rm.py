@@ -33,7 +33,7 @@ from neuronsmae.protocol.errors import (
     InvalidOptionError,
     ResetNeededError,
 )
-from neuronsmae.protocol.interface import StepHandle, VecArenaAPI, inherit_docstrings
+from neuronsmae.protocol.interface import StepHandle, VecArenaAPI, inherit_docstrings, per_arena
 from neuronsmae.protocol.launch import ServerCommand, check_launch, ports_of
 from neuronsmae.protocol.messages import (
     MAX_ARENAS,
@@ -271,16 +271,7 @@ class VecRM(VecArenaAPI):
     # ---- checks (what any server would refuse, refused before anything is sent) --------------
 
     def _entries(self, name: str, values: Any, error: type[Exception]) -> list[Any]:
-        if isinstance(values, (str, bytes, Mapping)) or not hasattr(values, "__len__"):
-            raise error(
-                f"{name} must be a sequence of {self.num_envs} entries (one per arena, or "
-                f"None), got {values!r:.80}"
-            )
-        if len(values) != self.num_envs:
-            raise error(
-                f"{name} must have {self.num_envs} entries (one per arena), got {len(values)}"
-            )
-        return list(values)
+        return per_arena(name, values, self.num_envs, error)
 
     def _seeds(self, seed: Any) -> list[int | None] | None:
         if seed is None:

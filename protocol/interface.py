@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.errors import InvalidContextError
+
 Action = Any
 """One agent's action: an ``int`` (abstract, discrete) or 4 floats ``(vx, vy, omega, target)``."""
 
@@ -114,6 +116,22 @@ def inherit_docstrings(cls: type) -> type:
             if method is not None and not method.__doc__:
                 method.__doc__ = getattr(contract, name).__doc__
     return cls
+
+
+def per_arena(
+    name: str, values: Any, num_envs: int, error: type[Exception] = InvalidContextError
+) -> list[Any]:
+    """``values`` as a list of one entry per arena (the vector calls' rule for ``seeds``,
+    ``contexts`` and action rows); ``error`` (naming ``name``) when it is not a sequence of
+    ``num_envs`` entries."""
+    if isinstance(values, (str, bytes, Mapping)) or not hasattr(values, "__len__"):
+        raise error(
+            f"{name} must be a sequence of {num_envs} entries (one per arena, or None), "
+            f"got {values!r:.80}"
+        )
+    if len(values) != num_envs:
+        raise error(f"{name} must have {num_envs} entries (one per arena), got {len(values)}")
+    return list(values)
 
 
 class StepHandle:

@@ -20,12 +20,11 @@ import numpy as np
 
 from neuronsmae.protocol.errors import (
     InvalidActionError,
-    InvalidContextError,
     InvalidOptionError,
     NeuronsMAEError,
     ResetNeededError,
 )
-from neuronsmae.protocol.interface import VecArenaAPI, inherit_docstrings
+from neuronsmae.protocol.interface import VecArenaAPI, inherit_docstrings, per_arena
 from neuronsmae.protocol.messages import MAX_ARENAS
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import check_seed, parse_contexts
@@ -194,18 +193,7 @@ class VecArena(VecArenaAPI):
 
     def _entries(self, name: str, values: Any) -> list[Any]:
         """One entry (or None) per arena, as a list; None → all None."""
-        if values is None:
-            return [None] * self.num_envs
-        if isinstance(values, (str, bytes, Mapping)) or not hasattr(values, "__len__"):
-            raise InvalidContextError(
-                f"{name} must be a sequence of {self.num_envs} entries (one per arena, or "
-                f"None), got {values!r:.80}"
-            )
-        if len(values) != self.num_envs:
-            raise InvalidContextError(
-                f"{name} must have {self.num_envs} entries (one per arena), got {len(values)}"
-            )
-        return list(values)
+        return [None] * self.num_envs if values is None else per_arena(name, values, self.num_envs)
 
     def _rows(self, actions: Any) -> Sequence[Any]:
         ok = (isinstance(actions, np.ndarray) and actions.ndim >= 1) or isinstance(actions, list)
