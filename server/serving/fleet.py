@@ -1,4 +1,4 @@
-"""``neuronsmae-serve``: run N arena servers on consecutive ports and keep them up.
+"""``neuronsmae-serve``: start N arena servers on consecutive ports and keep them up.
 
     neuronsmae-serve --base-port 10000 --count 8 --seed 1 [--arenas 1] [--host 127.0.0.1]
                      [--time-scale 100] [--router tcp/10.0.0.1:7447] [--interval 2]
