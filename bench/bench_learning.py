@@ -7,7 +7,7 @@ stops after ``--minutes`` of wall time (or ``--episodes``), evaluates the greedy
 steps and wall time. The project's target: VDN against the easy bot reaches a greedy win
 rate of at least 0.9 within 30 minutes on a 2-core machine::
 
-    python bench/bench_learning.py --alg vdn --level easy --minutes 30 --workers 1
+    python bench/bench_learning.py --alg vdn --level easy --minutes 30 --workers 2
 """
 
 from __future__ import annotations

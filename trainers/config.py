@@ -109,8 +109,8 @@ class TrainConfig:
     the default two)."""
     envs_per_worker: int = 8
     """Arenas each worker plays at once, in [1, 64], with one batched forward pass of the
-    agent network per decision for all of them. 8 gives a served arena at least 0.85 of an
-    in-process arena's CPU efficiency (``python -m bench.bench_vector``)."""
+    agent network per decision for all of them. At 8 a served arena costs about 1.15 times
+    the CPU of an in-process one per decision (``python -m bench.bench_vector``)."""
     sync: bool = False
     """Paper's loop: play an iteration of episodes, wait for all, then learn; else learn as
     episodes land (asynchronous)."""
@@ -222,7 +222,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 """Named layers applied before the config file.
 
-``paper`` is the paper's experiment (docs/results.md, "The paper's benchmark"): its learner
+``paper`` is the paper's experiment (docs/results.md, "The paper's experiment"): its learner
 (the observation as given, a linear Q head on the GRU, one-step double-Q targets, no
 augmentation), its hyper-parameters (Adam 5e-4, γ 0.99, ε 0.2 → 0.05, gradient-norm clip
 10, GRU 128, QMIX mixer 32) and its loop whatever the worker count here: an iteration is 20
