@@ -16,6 +16,7 @@ import argparse
 import ipaddress
 import logging
 import os
+import subprocess
 import sys
 from collections.abc import Sequence
 
@@ -34,7 +35,8 @@ from neuronsmae.server.serving.rpc import (
     check_port,
     watch_parent,
 )
-from neuronsmae.server.serving.service import DEFAULT_LEASE_S, ArenaService
+from neuronsmae.server.serving.service import DEFAULT_LEASE_S, ArenaService, warm_up
+from neuronsmae.server.sim.kernel_cache import compile_aside
 
 log = logging.getLogger("neuronsmae.server")
 
@@ -104,6 +106,12 @@ def _parser() -> argparse.ArgumentParser:
         help="logging level (WARNING)",
     )
     p.add_argument("--watch-parent", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument(
+        "--compile-only",
+        action="store_true",
+        help="compile the simulation's kernels into the cache and exit (servers do this in a "
+        "throwaway process before serving)",
+    )
     return p
 
 
@@ -141,6 +149,10 @@ def run(argv: Sequence[str] | None = None) -> int:
     if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
         log.error("--busy-poll must be in 0..%g microseconds", MAX_BUSY_POLL_US)
         return 2
+    if args.compile_only:
+        warm_up(Arena)
+        return 0
+    compile_first()
     warning = exposure_warning(args.host, args.port)
     if warning:
         log.warning("%s", warning)
@@ -181,6 +193,19 @@ def exposure_warning(host: str, port: int) -> str | None:
         "this arena (the protocol has no authentication); expose it only on a trusted "
         "network, or keep it on loopback behind a TLS router (deploy/zenoh-router-tls.json5)"
     )
+
+
+def compile_first() -> None:
+    """Have a throwaway ``neuronsmae-server --compile-only`` compile the kernels unless they
+    are cached for this checkout, so this process loads them instead of compiling them (see
+    ``server/sim/kernel_cache.py``: compiling keeps about 150 MB more resident per server).
+    Runs before the Zenoh session opens: a process with a session must not fork."""
+    try:
+        if compile_aside([sys.executable, "-m", "neuronsmae.server", "--compile-only"]):
+            log.info("kernels compiled in a throwaway process")
+    except (OSError, subprocess.SubprocessError) as exc:
+        detail = getattr(exc, "stderr", b"") or b""
+        log.warning("compiling aside failed (%s) %s; compiling here", exc, detail[-500:])
 
 
 def _serve(args: argparse.Namespace, stop: StopSignal) -> int:

@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numba
@@ -130,3 +131,51 @@ def test_editing_a_dependency_recompiles_the_kernel(tmp_path: Path) -> None:
     edited = probe()
     assert edited["bullets"] == 1.0  # the new constant, not the cached kernel's
     assert edited["hits"] == 0 and edited["cache"] != first["cache"]
+
+
+def _appender(path: Path, pause: float = 0.0) -> list[str]:
+    """A command that waits ``pause`` seconds, then appends one line to ``path``."""
+    code = f"import time; time.sleep({pause}); open({str(path)!r}, 'a').write('ran\\n')"
+    return [sys.executable, "-c", code]
+
+
+def test_compile_aside_runs_once_per_marker(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    marker, log = tmp_path / "compiled-x", tmp_path / "log"
+    monkeypatch.setattr(kernel_cache, "compiled_marker", lambda: marker)
+    assert kernel_cache.compile_aside(_appender(log)) is True
+    assert kernel_cache.compile_aside(_appender(log)) is False
+    assert log.read_text() == "ran\n" and marker.exists()
+
+
+def test_compile_aside_compiles_once_when_many_start_together(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    marker, log = tmp_path / "compiled-x", tmp_path / "log"
+    monkeypatch.setattr(kernel_cache, "compiled_marker", lambda: marker)
+    with ThreadPoolExecutor(4) as pool:
+        ran = list(pool.map(lambda _: kernel_cache.compile_aside(_appender(log, 0.5)), range(4)))
+    assert sorted(ran) == [False, False, False, True]
+    assert log.read_text() == "ran\n"
+
+
+def test_a_failed_compile_leaves_no_marker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    marker = tmp_path / "compiled-x"
+    monkeypatch.setattr(kernel_cache, "compiled_marker", lambda: marker)
+    with pytest.raises(subprocess.CalledProcessError):
+        kernel_cache.compile_aside([sys.executable, "-c", "raise SystemExit(3)"])
+    assert not marker.exists()
+
+
+def test_the_marker_changes_when_a_kernel_source_is_touched(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    source = tmp_path / "stepper.py"
+    source.write_text("x = 1\n")
+    monkeypatch.setattr(kernel_cache, "kernel_sources", lambda: [source])
+    before = kernel_cache.compiled_marker()
+    assert before == kernel_cache.compiled_marker()
+    stat = source.stat()
+    os.utime(source, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    assert kernel_cache.compiled_marker() != before
