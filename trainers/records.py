@@ -177,6 +177,7 @@ class Recorder:
                 "return": round(total_reward, 4),
                 "length": length,
                 "contexts": json.dumps(info.get("contexts", {}), sort_keys=True),
+                "opponent": info.get("opponent", ""),
             }
         )
 

@@ -121,6 +121,9 @@ class Sampler:
         self.landed: list[Episode] = []
         self.weights_ref: Any = None
         self.version = -1
+        self.opponents_ref: Any = None
+        """Red's pool policies in the object store (None: no policy plays red)."""
+        self.opponents_version = -1
         self._await_placement(start_timeout)
 
     def _spawn(self, i: int) -> Any:
@@ -189,6 +192,12 @@ class Sampler:
         self.weights_ref = ray.put(policy)
         self.version += 1
 
+    def broadcast_opponents(self, policies: Mapping[str, Policy]) -> None:
+        """Put red's pool policies (member id → policy) in the object store once; later
+        chunks pass the reference (a worker loads a version once)."""
+        self.opponents_ref = ray.put(dict(policies))
+        self.opponents_version += 1
+
     def submit(self, requests: Sequence[Request], worker: int | None = None) -> None:
         """Queue one chunk of requests on a worker (the least loaded live one by default)."""
         live = self._live()
@@ -199,7 +208,10 @@ class Sampler:
             worker = min(live, key=lambda i: load[i])
         actor = self.actors[worker]
         assert actor is not None
-        ref = actor.run.remote(self.weights_ref, self.version, list(requests))
+        ref = actor.run.remote(
+            self.weights_ref, self.version, list(requests), self.opponents_ref,
+            self.opponents_version,
+        )  # fmt: skip
         self.in_flight[ref] = _Task(worker, self.generation[worker], list(requests))
 
     def idle_slots(self) -> int:

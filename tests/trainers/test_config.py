@@ -55,7 +55,7 @@ def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
         "main": {"Friction_coeff": 0.5, "coef": 1.0},
         "coef=1.5": {"Friction_coeff": 0.5, "coef": 1.5},
     }
-    assert make_config().learner.augment == "enemies,field,allies"
+    assert make_config().learner.augment == "auto"  # every symmetry the task has
     args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
     assert config_from_args(args).learner.lr == 0.01  # --set still wins over the preset
     with pytest.raises(ConfigError, match="valid: paper"):
@@ -94,7 +94,11 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["level=expert"], "valid: 0, 1, easy, middle, hard, random"),
         (["batch_size=0"], "batch_size must be"),
         (["features=polar"], "valid: raw, relative"),
-        (["features=raw"], "head='points' needs features in .*'relative'"),
+        (["features=raw", "head=points"], "head='points' needs features in .*'relative'"),
+        (["arena.action_space=continuous"], "Q-learners .*valid: abstract, discrete"),
+        (["n_blue=4"], "arena.n_blue must be in"),
+        (["arena.options=mode=bots"], "arena.options sets \\['mode'\\]"),
+        (["opponent=expert"], "opponent entry 'expert'"),
         (["learner=3"], "a group: set learner.<name>"),
         (["eval.lr=1"], "unknown config key 'eval.lr'"),
         (["servers=cloud"], "valid: local, actors"),
