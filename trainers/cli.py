@@ -141,7 +141,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     from neuronsmae.trainers.train import train  # heavy imports (Ray, torch) after parsing
 
-    result = train(cfg, resume=args.resume)
+    try:
+        result = train(cfg, resume=args.resume)
+    except ConfigError as err:  # what only the environment can tell (layouts, contexts)
+        print(f"neuronsmae-train: {err}", file=sys.stderr)
+        return 2
     final, counters = result["final"], result["counters"]
     print(
         f"{cfg.alg}{f' (trained against {cfg.opponent})' if cfg.opponent else ''} vs "
