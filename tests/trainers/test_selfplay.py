@@ -92,9 +92,7 @@ def test_a_resumed_self_play_run_continues_identically(tmp_path: Path) -> None:
     assert seeds[0] == seeds[1]
 
 
-def test_a_fixed_checkpoint_is_an_opponent(
-    tmp_path: Path, capsys: pytest.CaptureFixture
-) -> None:
+def test_a_fixed_checkpoint_is_an_opponent(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     ckpt = make_checkpoint(tmp_path / "fixed.pt", 4)
     _train(tmp_path / "run", 4, f"opponent={ckpt}")
     assert set(_opponents(tmp_path / "run")) == {f"ckpt:{ckpt}"}
