@@ -8,27 +8,15 @@ actions only) for a team across a vector of arenas; given anything else, None.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint
 from neuronsmae.trainers.evaluate import load_policy
 from neuronsmae.trainers.opponents import GreedyTeam
-from neuronsmae.trainers.task import ArenaGroup
-
-
-def arena_options(config: dict[str, Any]) -> dict[str, Any]:
-    """The arena options a run was trained with, from its saved config (runs from before
-    the ``arena`` group trained the default task)."""
-    known = {f.name for f in dataclasses.fields(ArenaGroup)}
-    group = ArenaGroup(**{k: v for k, v in config.get("arena", {}).items() if k in known})
-    options = group.arena_options("cooperative")
-    del options["mode"]
-    return options
+from neuronsmae.trainers.task import trained_options
 
 
 class CheckpointPolicy:
@@ -38,7 +26,7 @@ class CheckpointPolicy:
         payload = load_checkpoint(path)
         self.path = str(checkpoint_path(path))
         self.policy = load_policy(path)
-        self.options = arena_options(payload["config"])
+        self.options = trained_options(payload["config"])
         self.env_info = self.policy.spec.env_info
         self.team: GreedyTeam | None = None
 

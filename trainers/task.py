@@ -127,6 +127,16 @@ class ArenaGroup:
         return {**typed, **parse_options(self.options), "mode": mode}
 
 
+def trained_options(config: dict[str, Any]) -> dict[str, Any]:
+    """The arena options a run was trained with, without the mode, from its saved config
+    (runs from before the ``arena`` group trained the default task)."""
+    known = {f.name for f in dataclasses.fields(ArenaGroup)}
+    group = ArenaGroup(**{k: v for k, v in config.get("arena", {}).items() if k in known})
+    options = group.arena_options("cooperative")
+    del options["mode"]
+    return options
+
+
 def blue_view(info: EnvInfo) -> EnvInfo:
     """``info`` as the learning team sees it: its agents are blue's (the first
     ``team_size`` of a competitive arena's agents, all of a cooperative arena's)."""

@@ -14,6 +14,11 @@ always below ``eval_seed``. Periodic greedy evaluations (the validation split) u
 ``eval_seed, eval_seed+1, ...`` and the final one (the test split) starts at
 ``eval_seed + TEST_SEED_OFFSET``: the win rate is measured on starts the agents never trained
 on, and the reported one on starts that did not pick the best weights either.
+
+The task comes from the ``arena`` group and the networks are sized from the workers'
+``get_env_info()`` (trainers/task.py). With ``opponent`` set, each training episode's red is
+drawn from a pool of bots, checkpoints and snapshots of the learner (trainers/pool.py,
+trainers/competition.py); evaluations always play the ``level`` bot.
 """
 
 from __future__ import annotations
