@@ -161,9 +161,13 @@ def draw_matrix(league: dict[str, Any], out: Path) -> Path:
         if not np.isnan(v):
             ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7)
     ax.set_xlabel("opponent")
-    ax.set_ylabel("player (score: wins + draws / 2, over both colours)")
+    ax.set_ylabel("player")
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04)
-    ax.set_title(f"league, {league['games']} games per pair")
+    ax.set_title(
+        f"score of each player against each opponent\n(wins + draws / 2 over "
+        f"{league['games']} games, both colours)",
+        fontsize=9,
+    )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
