@@ -137,10 +137,14 @@ class Arena(ArenaAPI):
         if self.zones is not None:
             self.zones.rng = self.rng
             self.zones.reset()
+        # Competitive mode hands one team to a bot for an episode when told (``bot_team``).
+        bot_team = ctx.bot_team if cfg.mode == "competitive" else "none"
         self.bots = {
-            BLUE: make_bot(cfg.blue_level, self.rng) if cfg.mode == "bots" else None,
+            BLUE: make_bot(cfg.blue_level, self.rng)
+            if cfg.mode == "bots" or bot_team == "blue"
+            else None,
             RED: make_bot(ctx.level, self.rng)
-            if cfg.mode == "cooperative" or cfg.mode == "bots"
+            if cfg.mode in ("cooperative", "bots") or bot_team == "red"
             else None,
         }
         self._wanted_mask = self._wanted()

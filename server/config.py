@@ -41,7 +41,8 @@ class ArenaConfig:
     """"cooperative": the caller drives blue, a bot drives red; "competitive": the caller
     drives both (blue agents first); "bots": bots drive both (for matches)."""
     blue_level: int | str = "easy"
-    """The bot that drives blue in "bots" mode (red's bot is the ``level`` context); the same
+    """The bot that drives blue in "bots" mode, and in "competitive" mode in the episodes reset
+    with the context ``bot_team="blue"`` (red's bot is the ``level`` context); the same
     values as ``level``: the released build's 0 or 1, or a name (easy, middle, hard, random,
     middle_spread, hard_flank; docs/contexts.md, "Bots")."""
     decision_steps: int | None = None

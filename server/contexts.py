@@ -62,6 +62,15 @@ OPPONENT_PREFIX = "opponent."
 CONTEXT_TABLE: dict[str, ContextKey] = {k.name: k for k in DYNAMICS_KEYS + OTHER_KEYS}
 CONTEXT_TABLE.update({OPPONENT_PREFIX + k.name: k for k in DYNAMICS_KEYS})
 
+BOT_TEAMS: tuple[str, ...] = ("none", "red", "blue")
+"""Values of the ``bot_team`` context: which team a bot drives in ``mode="competitive"``
+("none": the caller drives both; "red": the ``level`` bot drives red; "blue": the
+``blue_level`` option's bot drives blue). The team a bot drives ignores its action rows."""
+BOT_TEAM_DOC = (
+    "competitive mode: the team a bot drives this episode (none: the caller drives both; "
+    "red: the level bot; blue: the blue_level bot); that team's actions are ignored"
+)
+
 
 @dataclass(frozen=True)
 class EpisodeContext:
@@ -78,6 +87,9 @@ class EpisodeContext:
     level: int | str = DEFAULT_LEVEL
     """Red's bot: a released level number (0, 1; a float such as ``1.0`` becomes the int) or a
     name from :data:`LEVEL_NAMES`."""
+    bot_team: str = "none"
+    """Competitive mode: the team a bot drives this episode (:data:`BOT_TEAMS`); the other
+    modes ignore it (red's bot drives red in cooperative mode, bots drive both in "bots")."""
 
     def to_dict(self) -> dict[str, Any]:
         """The contexts as given to reset (released names), for records and replays."""
@@ -85,6 +97,7 @@ class EpisodeContext:
             "coef": self.coef,
             "opponent_hp": self.opponent_hp,
             "level": self.level,
+            "bot_team": self.bot_team,
         }
         for key in DYNAMICS_KEYS:
             assert key.chassis_field is not None
@@ -119,6 +132,9 @@ def context_table() -> list[dict[str, Any]]:
             "doc": LEVEL_DOC,
         }
     )
+    rows.append(
+        {"key": "bot_team", "default": "none", "choices": list(BOT_TEAMS), "doc": BOT_TEAM_DOC}
+    )
     return rows
 
 
@@ -128,14 +144,21 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
     if not all(isinstance(key, str) for key in contexts):
         raise InvalidContextError("context keys must be strings")
     values: dict[str, float] = {}
-    level = DEFAULT_LEVEL
+    level, bot_team = DEFAULT_LEVEL, "none"
     for key, value in contexts.items():
         if key == "level":
             level = _parse_level(value)
             continue
+        if key == "bot_team":
+            if not isinstance(value, str) or value not in BOT_TEAMS:
+                raise InvalidContextError(
+                    f"context 'bot_team'={value!r} is not valid; choose one of {list(BOT_TEAMS)}"
+                )
+            bot_team = value
+            continue
         spec = CONTEXT_TABLE.get(key)
         if spec is None:
-            valid = sorted([*CONTEXT_TABLE, "level"])
+            valid = sorted([*CONTEXT_TABLE, "level", "bot_team"])
             raise InvalidContextError(f"unknown context key {key!r}; valid keys: {valid}")
         values[key] = _check_value(key, value, spec)
     blue = {k.chassis_field: values.get(k.name, k.default) for k in DYNAMICS_KEYS}
@@ -147,6 +170,7 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
         coef=values.get("coef", 1.0),
         opponent_hp=values.get("opponent_hp", 600.0),
         level=level,
+        bot_team=bot_team,
     )
 
 

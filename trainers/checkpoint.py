@@ -65,12 +65,14 @@ def save_checkpoint(
     np_rng: np.random.Generator,
     selection: dict[str, Any] | None = None,
     starts: dict[str, Any] | None = None,
+    opponents: dict[str, Any] | None = None,
 ) -> None:
     """Write the checkpoint atomically (temporary file, then rename).
 
     ``learner_state`` is ``QLearner.state_dict()``: its ``agent`` entry is what acting needs.
     ``selection`` is the evaluation that chose these weights (for ``best.pt``).
-    ``starts`` is the start replay's state (``StartReplay.state_dict()``), for ``--resume``.
+    ``starts`` is the start replay's state (``StartReplay.state_dict()``) and ``opponents``
+    the opponent pool's (its snapshots), for ``--resume``.
     """
     payload = {
         "format": FORMAT,
@@ -81,6 +83,7 @@ def save_checkpoint(
         "counters": asdict(counters),
         "selection": selection,
         "starts": starts,
+        "opponents": opponents,
         "rng": {
             "torch": torch.get_rng_state(),
             "numpy": np_rng.bit_generator.state,

@@ -44,7 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     summary = __doc__.split("\n")[0].replace("``", "")
     p = argparse.ArgumentParser(prog="neuronsmae-train", description=summary)
     p.add_argument("--alg", choices=sorted(ALGORITHMS), help="learning algorithm (mixer)")
-    p.add_argument("--level", choices=LEVELS, help="opponent bot level")
+    p.add_argument("--level", choices=LEVELS, help="red bot (with --opponent: the evaluations')")
+    p.add_argument(
+        "--opponent",
+        metavar="POOL",
+        help="train against a pool: comma list of bot levels, checkpoints and 'self'",
+    )
     p.add_argument("--workers", type=int, help="rollout workers (default: cores - 1, at least 2)")
     p.add_argument("--episodes", type=int, help="training episodes in total")
     p.add_argument("--out", help="run directory (default runs/<alg>_<level>_s<seed>)")
@@ -75,6 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
 FLAG_KEYS = {
     "alg": "alg",
     "level": "level",
+    "opponent": "opponent",
     "workers": "workers",
     "episodes": "episodes",
     "out": "out",
@@ -135,10 +141,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     from neuronsmae.trainers.train import train  # heavy imports (Ray, torch) after parsing
 
-    result = train(cfg, resume=args.resume)
+    try:
+        result = train(cfg, resume=args.resume)
+    except ConfigError as err:  # what only the environment can tell (layouts, contexts)
+        print(f"neuronsmae-train: {err}", file=sys.stderr)
+        return 2
     final, counters = result["final"], result["counters"]
     print(
-        f"{cfg.alg} vs {cfg.level} bot: greedy win rate {final['win_rate']:.2f} over "
+        f"{cfg.alg}{f' (trained against {cfg.opponent})' if cfg.opponent else ''} vs "
+        f"{cfg.level} bot: greedy win rate {final['win_rate']:.2f} over "
         f"{final['eval_episodes']} held-out episodes (draws {final['draw_rate']:.2f}, "
         f"return {final['mean_return']:.1f}) after {counters['episodes']} episodes, "
         f"{counters['env_steps']} env steps, {counters['wall_seconds']:.0f} s; "

@@ -45,13 +45,17 @@ from neuronsmae.trainers.config_groups import (
 from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.experimental.config import ExperimentalConfig
 from neuronsmae.trainers.mixers import ALGORITHMS
+from neuronsmae.trainers.pool import SelfPlayConfig, parse_opponents
+from neuronsmae.trainers.task import ArenaGroup
 
 __all__ = [
+    "ArenaGroup",
     "ClusterConfig",
     "ConfigError",
     "EvalConfig",
     "ExperimentalConfig",
     "LearnerConfig",
+    "SelfPlayConfig",
     "TrainConfig",
     "field_docs",
     "make_config",
@@ -78,7 +82,14 @@ class TrainConfig:
     """Algorithm: iql (no mixer), vdn (sum) or qmix (monotonic hypernetwork mixer)."""
     level: str = "easy"
     """Red's bot: easy, middle or hard (the paper's), random, middle_spread, hard_flank (this
-    project's variants), or "0" / "1" (the released build's levels)."""
+    project's variants), or "0" / "1" (the released build's levels). With ``opponent`` set,
+    the bot every evaluation plays."""
+    opponent: str = ""
+    """Train against a pool instead of the ``level`` bot: a comma list of bot levels,
+    checkpoint files or run directories, and ``self`` (snapshots of the learner, see the
+    ``selfplay`` group); each training episode draws one member by δ-uniform sampling
+    (trainers/pool.py). A policy on red needs equal teams and the blue layout it was trained
+    on. Empty: every episode plays ``level``."""
     seed: int = 1
     """Seeds the networks, exploration, replay sampling and the training episodes."""
     episodes: int = 30_000
@@ -127,12 +138,25 @@ class TrainConfig:
     """Greedy evaluations, model selection and checkpoints (keys ``eval.<name>``)."""
     cluster: ClusterConfig = field(default_factory=ClusterConfig)
     """Ray cluster, worker placement and remote servers (keys ``cluster.<name>``)."""
+    arena: ArenaGroup = field(default_factory=ArenaGroup)
+    """The task: action space, team sizes, observability, LiDAR, reward, spawn and other
+    arena options (keys ``arena.<name>``; trainers/task.py)."""
+    selfplay: SelfPlayConfig = field(default_factory=SelfPlayConfig)
+    """Snapshots of the learner and the opponent draw (keys ``selfplay.<name>``)."""
     experimental: ExperimentalConfig = field(default_factory=ExperimentalConfig)
     """Experiments, off by default (keys ``experimental.<name>``)."""
 
     def __post_init__(self) -> None:
         check_choice("alg", self.alg, sorted(ALGORITHMS))
         check_choice("level", self.level, LEVELS)
+        fixed, self_play = parse_opponents(self.opponent)
+        policies = self_play or any(m.is_policy for m in fixed)
+        if policies and self.arena.n_blue != self.arena.n_red:
+            raise ConfigError(
+                f"opponent={self.opponent!r} puts a policy on red, which needs equal teams "
+                f"(competitive mode); got arena.n_blue={self.arena.n_blue}, "
+                f"arena.n_red={self.arena.n_red}"
+            )
         if self.iteration_episodes < 0:
             raise ConfigError(f"iteration_episodes must be ≥ 0, got {self.iteration_episodes}")
         try:
@@ -174,6 +198,8 @@ GROUPS: dict[str, type] = {
     "learner": LearnerConfig,
     "eval": EvalConfig,
     "cluster": ClusterConfig,
+    "arena": ArenaGroup,
+    "selfplay": SelfPlayConfig,
     "experimental": ExperimentalConfig,
 }
 """The groups nested in :class:`TrainConfig`, by field name."""

@@ -94,20 +94,24 @@ class LearnerConfig:
     --set td_lambda=0.6 --seed 2``)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
-    features: str = "relative"
-    """Agent inputs: raw (the paper's: the observation as given) or relative (plus geometry
-    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2)."""
-    head: str = "points"
-    """Q head: flat (the paper's: a linear output per action) or points (adds one small MLP
-    that scores each action from its enemy's and point's features; needs 'relative'). On the
-    easy bot it roughly doubles the greedy win rate after 500 episodes (measured with
+    features: str = "auto"
+    """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
+    derived from it, see trainers/features.py; learns much faster on the abstract 2 v 2) or
+    auto: relative when the observation holds the poses and candidate points, else raw
+    (trainers/task.py)."""
+    head: str = "auto"
+    """Q head: flat (the paper's: a linear output per action), points (adds one small MLP
+    that scores each action from its enemy's and point's features; needs 'relative' and
+    abstract actions) or auto: points where it fits, else flat. On the easy bot points
+    roughly doubles the greedy win rate after 500 episodes (measured with
     ``bench/bench_learning.py``, against ``--set head=flat``)."""
-    augment: str = "enemies,field,allies"
+    augment: str = "auto"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
-    every scene in all its equivalent forms: 'none', or a comma list of enemies (swap the
+    every scene in all its equivalent forms: 'none', a comma list of enemies (swap the
     enemy slots), field (turn the scene half a turn about the field's centre) and allies
-    (swap the agents); see trainers/symmetry.py. Against the easy bot all three reach the
-    0.85 plateau in about half the episodes, but not higher (measured: 0.74-0.86 after 1,000
+    (swap the agents), see trainers/symmetry.py, or auto: every one the task has (all three
+    on the default 2 v 2; trainers/task.py). Against the easy bot all three reach the 0.85
+    plateau in about half the episodes, but not higher (measured: 0.74-0.86 after 1,000
     episodes against 0.625-0.78 with ``python bench/bench_learning.py --set augment=none``)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
@@ -125,16 +129,17 @@ class LearnerConfig:
     """Gradient updates per training round (per iteration in synchronous mode)."""
 
     def __post_init__(self) -> None:
-        check_choice("features", self.features, FEATURES)
-        check_choice("head", self.head, ("flat", "points"))
-        if self.head == "points" and self.features not in POINT_FEATURES:
+        check_choice("features", self.features, (*FEATURES, "auto"))
+        check_choice("head", self.head, ("flat", "points", "auto"))
+        if self.head == "points" and self.features not in (*POINT_FEATURES, "auto"):
             raise ConfigError(
                 f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"
             )
         try:
-            parse_generators(self.augment)
+            if self.augment != "auto":
+                parse_generators(self.augment)
         except ValueError as err:
-            raise ConfigError(str(err)) from None
+            raise ConfigError(f"{err} (or 'auto')") from None
         check_positive(
             self, "batch_size", "buffer_size", "train_every", "updates_per_round",
             "target_update_interval", "agent_hidden", "mixer_embed", "hypernet_hidden",

@@ -1,9 +1,9 @@
 """Greedy evaluation: outcome statistics, a policy loaded from a checkpoint, and a match.
 
-:func:`evaluate_checkpoint` is what ``neuronsmae-match --blue runs/.../checkpoint.pt`` calls:
-it plays the checkpoint's agents greedily (ε = 0, available actions only) against the bot
-on seeds ``seed, seed+1, ...`` in an in-process arena and returns the win rate.
-:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers.
+:func:`evaluate_checkpoint` plays a checkpoint's agents greedily (ε = 0, available actions
+only) against a bot on seeds ``seed, seed+1, ...`` and returns the win rate.
+:class:`GreedyPolicy` is the same agent as a step-by-step controller for other callers; the
+match and league commands play checkpoints batched through :mod:`.policies`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, pol
 from neuronsmae.trainers.config import LEVELS
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
+from neuronsmae.trainers.task import trained_options
 
 
 def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
@@ -129,7 +130,8 @@ def evaluate_checkpoint(
     Episode ``k`` is reset with seed ``seed + k``, so two checkpoints evaluated with the same
     arguments meet exactly the same starts. ``contexts`` adds reset contexts (e.g.
     ``{"coef": 1.5}``). ``envs`` arenas play at once (``env="remote"``: on a server at
-    ``port``, or a private one when None). Returns the rates of :func:`summarize` plus
+    ``port``, or a private one when None), with the options the run trained with. Returns
+    the rates of :func:`summarize` plus
     ``level``, ``seed``, ``checkpoint``, the run's ``alg`` and its training
     ``episodes_trained``.
     """
@@ -139,7 +141,8 @@ def evaluate_checkpoint(
         raise ValueError(f"episodes must be ≥ 1, got {episodes}")
     payload = load_checkpoint(path)
     policy = load_policy(path)
-    worker = RolloutWorker(0, env, seed, port, envs=min(envs, episodes))
+    options = {**trained_options(payload["config"]), "mode": "cooperative"}
+    worker = RolloutWorker(0, env, seed, port, options, envs=min(envs, episodes))
     ctx = {**(contexts or {}), "level": level}
     try:
         played = worker.run(
@@ -158,14 +161,11 @@ def evaluate_checkpoint(
 
 
 class MatchPolicy(GreedyPolicy):
-    """A checkpoint in the shape ``neuronsmae-match --blue CHECKPOINT`` expects.
-
-    Registered as the ``neuronsmae.policies`` entry point, so the match command (in the
-    server package, which must not import the trainers) finds it by name.
-    """
+    """A checkpoint of the default task as a one-arena controller with its arena options
+    (``bench/outcomes.py``); the match command uses :mod:`.policies` instead."""
 
     options: dict[str, Any] = {"action_space": "abstract"}  # noqa: RUF012
-    """Arena options the trainers' agents are built for (abstract 2 v 2, cooperative)."""
+    """Arena options of the default task (abstract 2 v 2, cooperative)."""
 
     def act(
         self, obs: Sequence[np.ndarray], avail: Sequence[np.ndarray], state: Any = None

@@ -58,9 +58,12 @@ EVAL_COLUMNS = (
 """Columns of ``eval.csv`` (greedy play on held-out seeds): ``split`` is ``validation``
 (periodic) or ``test`` (final); ``weights`` is ``latest`` or ``best`` (see ``keep_best``);
 ``contexts`` names the evaluation's fixed contexts (``main``, or an extra test set)."""
-EPISODE_COLUMNS = ("episode", "seed", "epsilon", "winner", "return", "length", "contexts")
+EPISODE_COLUMNS = (
+    "episode", "seed", "epsilon", "winner", "return", "length", "contexts", "opponent",
+)  # fmt: skip
 """Columns of ``episodes.csv``: every stored training episode, with the contexts it was
-played with (a JSON map), in the order they were stored."""
+played with (a JSON map) and red's pool member (``opponent``; empty without a pool), in the
+order they were stored."""
 
 
 @dataclass(frozen=True)
@@ -177,6 +180,7 @@ class Recorder:
                 "return": round(total_reward, 4),
                 "length": length,
                 "contexts": json.dumps(info.get("contexts", {}), sort_keys=True),
+                "opponent": info.get("opponent", ""),
             }
         )
 

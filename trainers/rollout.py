@@ -12,6 +12,11 @@ vector step. A finished arena starts its next request in the following step (the
 next-step autoreset); an arena with nothing left to play is left idle until the others
 finish. Only whole episodes are returned, and many environment steps are paid for by one
 Ray call.
+
+In a competitive arena (the agents are blue then red) the learner's policy drives blue and
+red is the episode's opponent (``Request.opponent``): a pool member's policy, batched per
+opponent on this worker (:class:`~neuronsmae.trainers.opponents.OpponentActors`), or the
+arena's bot (``bot_team="red"``). Episodes hold blue's rows only.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from neuronsmae.protocol.interface import StepHandle
 from neuronsmae.trainers.agent import epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.learner import AgentSpec
+from neuronsmae.trainers.opponents import OpponentActors
 
 DEFAULT_ENV_OPTIONS: Mapping[str, Any] = {
     "action_space": "abstract",
@@ -91,6 +97,9 @@ class Request:
     """The episode's reset contexts (``level``, ``coef``, dynamics keys; docs/contexts.md)."""
     kind: str = "train"
     """``train`` (goes to the buffer) or ``eval`` (only counted)."""
+    opponent: str = ""
+    """Red's pool member (``bot:<level>``, ``ckpt:<path>``, ``self:<episodes>``; the
+    contexts put a bot on red); "": the arena's own red (the ``level`` bot)."""
 
 
 def blue_alive(info: Mapping[str, Any], n_agents: int) -> np.ndarray:
@@ -149,10 +158,34 @@ class _Track:
                 "epsilon": request.epsilon,
                 "contexts": dict(request.contexts),
                 "kind": request.kind,
+                "opponent": request.opponent,
                 "worker": worker,
                 "seconds": time.perf_counter() - self.start,
             },
         )
+
+
+class _Arrays:
+    """What the worker's arenas show now: blue's featurized observations and masks, the
+    global state, and red's raw observations and masks (competitive mode; else empty)."""
+
+    def __init__(self, raw: np.ndarray, state: np.ndarray, avail: np.ndarray, n: int,
+                 featurize: Any) -> None:  # fmt: skip
+        self.obs, self.state, self.avail = featurize(raw[:, :n]), state, avail[:, :n]
+        self.red_obs, self.red_avail = raw[:, n:], avail[:, n:]
+
+    def updated(self, rows: slice, raw: np.ndarray, env: VecArenaAPI, n: int, featurize: Any
+                ) -> _Arrays:  # fmt: skip
+        """Fresh copies with ``rows`` taken from the step just received (the episodes keep
+        views of the old arrays)."""
+        new = object.__new__(_Arrays)
+        state, avail = env.get_state(), env.get_avail_actions()
+        for name in ("obs", "state", "avail", "red_obs", "red_avail"):
+            setattr(new, name, getattr(self, name).copy())
+        new.obs[rows] = featurize(raw[rows, :n])
+        new.state[rows], new.avail[rows] = state[rows], avail[rows, :n]
+        new.red_obs[rows], new.red_avail[rows] = raw[rows, n:], avail[rows, n:]
+        return new
 
 
 class _Slots:
@@ -176,26 +209,34 @@ class _Slots:
     def busy(self) -> bool:
         return any(t is not None for t in self.tracks)
 
-    def start(self, entries: list[tuple[int, Request] | None], obs: np.ndarray,
-              state: np.ndarray, avail: np.ndarray) -> None:  # fmt: skip
+    def _begin(self, i: int, entry: tuple[int, Request], now: _Arrays) -> None:
+        """Arena ``lo + i`` starts the episode ``entry``: its track, and red's opponent."""
+        j = self.lo + i
+        self.tracks[i] = _Track(*entry, now.obs[j], now.state[j], now.avail[j])
+        if self.worker.opponents is not None:
+            self.worker.opponents.begin(j, entry[1].opponent)
+
+    def start(self, entries: list[tuple[int, Request] | None], now: _Arrays) -> None:
         """The first episode of each arena (None: the arena has nothing to play)."""
         for i, entry in enumerate(entries):
             if entry is not None:
-                j = self.lo + i
-                self.tracks[i] = _Track(*entry, obs[j], state[j], avail[j])
+                self._begin(i, entry, now)
 
-    def send(self, spec: AgentSpec, obs: np.ndarray, avail: np.ndarray) -> StepHandle:
-        """Choose every arena's actions (one batched forward) and start the group's step."""
+    def send(self, spec: AgentSpec, now: _Arrays) -> StepHandle:
+        """Choose every arena's actions (one batched forward for blue, one per opponent for
+        red) and start the group's step."""
         w, n, lo, hi = self.worker, self.worker.n_agents, self.lo, self.hi
         eps = torch.tensor([0.0 if t is None else t.request.epsilon for t in self.tracks])
-        inputs = spec.inputs(torch.from_numpy(obs[lo:hi]), self.last)  # [k, n, D]
+        inputs = spec.inputs(torch.from_numpy(now.obs[lo:hi]), self.last)  # [k, n, D]
         q, self.hidden = w.agent(inputs.reshape((hi - lo) * n, 1, -1), self.hidden)
         self.actions = epsilon_greedy(
-            q[:, 0], torch.from_numpy(avail[lo:hi]).reshape((hi - lo) * n, -1),
+            q[:, 0], torch.from_numpy(now.avail[lo:hi]).reshape((hi - lo) * n, -1),
             eps.repeat_interleave(n), w.generator,
         ).reshape(hi - lo, n)  # fmt: skip
-        rows = np.zeros((w.envs, n), dtype=np.int64)
-        rows[lo:hi] = self.actions.numpy()
+        rows = np.zeros((w.envs, n + w.n_red), dtype=np.int64)
+        rows[lo:hi, :n] = self.actions.numpy()
+        if w.opponents is not None:
+            rows[lo:hi, n:] = w.opponents.act(lo, hi, now.red_obs[lo:hi], now.red_avail[lo:hi])
         seeds: list[int | None] = [None] * w.envs
         contexts: list[dict[str, Any] | None] = [None] * w.envs
         active = np.zeros(w.envs, dtype=bool)
@@ -208,14 +249,12 @@ class _Slots:
     def receive(
         self,
         step: tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]],
-        obs: np.ndarray,
-        state: np.ndarray,
-        avail: np.ndarray,
+        now: _Arrays,
         queue: list[tuple[int, Request]],
         out: list[Episode | None],
     ) -> None:
-        """Record the step's transitions (``obs``, ``state``, ``avail``: the arenas now);
-        hand finished episodes to ``out`` and the next requests to their arenas."""
+        """Record the step's transitions (``now``: the arenas after it); hand finished
+        episodes to ``out`` and the next requests to their arenas."""
         w, n = self.worker, self.worker.n_agents
         _, rewards, dones, infos = step
         actions = self.actions
@@ -224,13 +263,13 @@ class _Slots:
                 continue
             j, nxt = self.lo + i, self.following[i]
             if nxt is not None:  # reset by this step: the new episode's first rows
-                self.tracks[i] = _Track(*nxt, obs[j], state[j], avail[j])
+                self._begin(i, nxt, now)
                 self.following[i] = None
                 self.hidden[:, i * n : (i + 1) * n] = 0.0
                 actions[i] = -1
                 continue
-            track.add(actions[i].numpy().copy(), float(np.mean(rewards[j])), obs[j], state[j],
-                      avail[j], blue_alive(infos[j], n))  # fmt: skip
+            track.add(actions[i].numpy().copy(), float(np.mean(rewards[j, :n])), now.obs[j],
+                      now.state[j], now.avail[j], blue_alive(infos[j], n))  # fmt: skip
             if dones[j]:
                 out[track.order] = track.episode(infos[j], w.index)
                 if queue:  # the arena plays the next request, reset by the next step
@@ -265,7 +304,10 @@ class RolloutWorker:
         self.envs = envs
         self.groups = max(1, min(groups, envs))
         info = EnvInfo.from_dict(self.env.get_env_info())
-        self.n_agents, self.n_actions = info.n_agents, info.n_actions
+        # Blue's agents are the learner's; a competitive arena's other agents are red's.
+        self.n_agents, self.n_actions = info.team_size, info.n_actions
+        self.n_red = info.n_agents - info.team_size
+        self.opponents = OpponentActors(envs, self.n_red) if self.n_red else None
         self.spec: AgentSpec | None = None
         self.agent: Any = None
         self.version = -1
@@ -290,45 +332,61 @@ class RolloutWorker:
         """Play one whole episode with ε-greedy actions and return it (see :meth:`run`)."""
         return self.run(policy, version, [Request(seed, epsilon, dict(contexts))])[0]
 
+    def set_opponents(self, opponents: Mapping[str, Policy] | None, version: int) -> None:
+        """Load red's pool policies (member id → policy) unless this version is loaded."""
+        if opponents is None:
+            return
+        if self.opponents is None:
+            raise ValueError(
+                "opponent policies need a competitive arena (mode='competitive'), whose "
+                "agents include red's"
+            )
+        self.opponents.load(opponents, version)
+
     @torch.no_grad()
-    def run(self, policy: Policy, version: int, requests: Sequence[Request]) -> list[Episode]:
+    def run(
+        self,
+        policy: Policy,
+        version: int,
+        requests: Sequence[Request],
+        opponents: Mapping[str, Policy] | None = None,
+        opponents_version: int = -1,
+    ) -> list[Episode]:
         """Play every request to its end, ``envs`` at a time; the episodes in request order.
 
-        Nothing is returned unless every episode reached ``done``: if the environment fails
-        the exception propagates and the partial episodes are simply lost.
+        ``opponents``: the policies of red's pool members the requests name (competitive
+        arenas). Nothing is returned unless every episode reached ``done``: if the
+        environment fails the exception propagates and the partial episodes are lost.
         """
         if not requests:
             return []
         self.set_policy(policy, version)
-        spec, env, k = policy.spec, self.env, self.envs
+        self.set_opponents(opponents, opponents_version)
+        spec, env, k, n = policy.spec, self.env, self.envs, self.n_agents
         featurize = spec.featurizer()
         queue = list(enumerate(requests))
         first = [queue.pop(0) if queue else None for _ in range(k)]
-        obs = featurize(env.reset(
+        raw = env.reset(
             [None if f is None else dict(f[1].contexts) for f in first],
             [None if f is None else f[1].seed for f in first],
-        ))  # fmt: skip
-        state, avail = env.get_state(), env.get_avail_actions()
+        )
+        now = _Arrays(raw, env.get_state(), env.get_avail_actions(), n, featurize)
         bounds = np.linspace(0, k, self.groups + 1).astype(int)
         groups = [_Slots(self, lo, hi) for lo, hi in itertools.pairwise(bounds)]
         for g in groups:
-            g.start(first[g.lo : g.hi], obs, state, avail)
+            g.start(first[g.lo : g.hi], now)
         out: list[Episode | None] = [None] * len(requests)
-        pending = [g.send(spec, obs, avail) if g.busy else None for g in groups]
+        pending = [g.send(spec, now) if g.busy else None for g in groups]
         while any(p is not None for p in pending):
             for i, g in enumerate(groups):
                 handle = pending[i]
                 if handle is None:
                     continue
                 step = handle.result()
-                # Only this group's rows changed: take them into fresh copies of the worker's
-                # arrays (the episodes keep views of the old ones).
-                rows = slice(g.lo, g.hi)
-                obs, state, avail = obs.copy(), state.copy(), avail.copy()
-                obs[rows] = featurize(step[0][rows])
-                state[rows], avail[rows] = env.get_state()[rows], env.get_avail_actions()[rows]
-                g.receive(step, obs, state, avail, queue, out)
-                pending[i] = g.send(spec, obs, avail) if g.busy else None
+                # Only this group's rows changed.
+                now = now.updated(slice(g.lo, g.hi), step[0], env, n, featurize)
+                g.receive(step, now, queue, out)
+                pending[i] = g.send(spec, now) if g.busy else None
         return [episode for episode in out if episode is not None]
 
     def check_contexts(self, sets: Sequence[Mapping[str, Any]]) -> None:

@@ -56,6 +56,9 @@ class _Task:
     worker: int
     generation: int
     requests: list[Request]
+    opponents: tuple[Any, int] = (None, -1)
+    """The opponents' reference and version the requests were drawn against (a chunk sent
+    again after a failure keeps them, whatever the pool holds by then)."""
 
 
 def check_capacity(need: Mapping[str, float], n_workers: int) -> None:
@@ -121,6 +124,9 @@ class Sampler:
         self.landed: list[Episode] = []
         self.weights_ref: Any = None
         self.version = -1
+        self.opponents_ref: Any = None
+        """Red's pool policies in the object store (None: no policy plays red)."""
+        self.opponents_version = -1
         self._await_placement(start_timeout)
 
     def _spawn(self, i: int) -> Any:
@@ -189,8 +195,21 @@ class Sampler:
         self.weights_ref = ray.put(policy)
         self.version += 1
 
-    def submit(self, requests: Sequence[Request], worker: int | None = None) -> None:
-        """Queue one chunk of requests on a worker (the least loaded live one by default)."""
+    def broadcast_opponents(self, policies: Mapping[str, Policy]) -> None:
+        """Put red's pool policies (member id → policy) in the object store once; later
+        chunks pass the reference (a worker loads a version once)."""
+        self.opponents_ref = ray.put(dict(policies))
+        self.opponents_version += 1
+
+    def submit(
+        self,
+        requests: Sequence[Request],
+        worker: int | None = None,
+        opponents: tuple[Any, int] | None = None,
+    ) -> None:
+        """Queue one chunk of requests on a worker (the least loaded live one by default),
+        with red's pool policies as last broadcast (or ``opponents``: a reference and its
+        version)."""
         live = self._live()
         if worker is None or self.actors[worker] is None:
             load = {i: 0 for i in live}
@@ -199,8 +218,9 @@ class Sampler:
             worker = min(live, key=lambda i: load[i])
         actor = self.actors[worker]
         assert actor is not None
-        ref = actor.run.remote(self.weights_ref, self.version, list(requests))
-        self.in_flight[ref] = _Task(worker, self.generation[worker], list(requests))
+        opponents = opponents or (self.opponents_ref, self.opponents_version)
+        ref = actor.run.remote(self.weights_ref, self.version, list(requests), *opponents)
+        self.in_flight[ref] = _Task(worker, self.generation[worker], list(requests), opponents)
 
     def idle_slots(self) -> int:
         """Chunks that can be queued to keep ``pipeline`` per live worker in flight."""
@@ -230,7 +250,8 @@ class Sampler:
             episodes: list[Episode] = ray.get(ref)
         except RayError as err:
             self._fail(task.worker, task.generation, err)
-            self.submit(task.requests, task.worker)  # the same chunk again, on a fresh actor
+            # the same chunk again, on a fresh actor
+            self.submit(task.requests, task.worker, task.opponents)
             return
         self.failures[task.worker] = 0
         self.landed.extend(episodes)

@@ -14,6 +14,11 @@ always below ``eval_seed``. Periodic greedy evaluations (the validation split) u
 ``eval_seed, eval_seed+1, ...`` and the final one (the test split) starts at
 ``eval_seed + TEST_SEED_OFFSET``: the win rate is measured on starts the agents never trained
 on, and the reported one on starts that did not pick the best weights either.
+
+The task comes from the ``arena`` group and the networks are sized from the workers'
+``get_env_info()`` (trainers/task.py). With ``opponent`` set, each training episode's red is
+drawn from a pool of bots, checkpoints and snapshots of the learner (trainers/pool.py,
+trainers/competition.py); evaluations always play the ``level`` bot.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from neuronsmae.trainers.checkpoint import (
     restore_rng,
     save_checkpoint,
 )
+from neuronsmae.trainers.competition import Competition
 from neuronsmae.trainers.config import ConfigError, TrainConfig
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
@@ -56,6 +62,7 @@ from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy, Request
 from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
+from neuronsmae.trainers.task import blue_view, resolve_learner
 
 TEST_SEED_OFFSET = 10_000_000
 """Test seeds start this far above ``eval_seed``, clear of any validation seed."""
@@ -99,8 +106,14 @@ class Trainer:
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.torch_threads)
+        self.competition = Competition(cfg)
+        self.mode = "competitive" if self.competition.competitive else "cooperative"
+        """The arenas' mode: competitive once a policy may play red (a bot then plays red
+        through the ``bot_team`` context)."""
         self.opponent: dict[str, Any] = {"level": level_from_arg(cfg.level)}
-        """The contexts every episode shares: red's bot."""
+        """The contexts of every evaluation: red's ``level`` bot."""
+        if self.competition.competitive:
+            self.opponent["bot_team"] = "red"
         self.train_contexts = ContextSpec.parse(cfg.contexts)
         """Each training episode's further contexts, drawn per episode."""
         self.eval_contexts = {
@@ -148,20 +161,22 @@ class Trainer:
             groups=2 if cfg.env == "remote" else 1,  # overlap the server's steps and the policy
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
+            env_options=cfg.arena.arena_options(self.mode),
             **sampler_placement(cfg, n_workers, base_seed),
         )
         self._check_contexts()
-        info = EnvInfo.from_dict(self.sampler.env_info())
-        self.env = EnvSpec.of(info, cfg.learner.features)
+        info = blue_view(EnvInfo.from_dict(self.sampler.env_info()))
+        self.info = info
+        """The task from the learning team's side (its agents are blue's)."""
+        self.lcfg = lc = resolve_learner(cfg.learner, info, cfg.arena.observability,
+                                         cfg.arena.spawn)  # fmt: skip
+        """The learner settings with every ``auto`` made concrete for this task."""
+        self.env = EnvSpec.of(info, lc.features)
         self.spec = agent_spec(
-            self.env,
-            cfg.learner.agent_hidden,
-            cfg.learner.last_action_input,
-            cfg.learner.agent_id_input,
-            cfg.learner.features,
-            cfg.learner.head,
-            info,
-        )
+            self.env, lc.agent_hidden, lc.last_action_input, lc.agent_id_input, lc.features,
+            lc.head, info,
+        )  # fmt: skip
+        self.competition.load_fixed(info)
         self.learner = QLearner(
             self.env,
             self.spec,
@@ -175,7 +190,7 @@ class Trainer:
             hypernet_hidden=cfg.learner.hypernet_hidden,
             td_lambda=cfg.learner.td_lambda,
         )
-        self.group = task_group(parse_generators(cfg.learner.augment), cfg.learner.features, info)
+        self.group = task_group(parse_generators(lc.augment), lc.features, info)
         self.buffer = EpisodeReplayBuffer(
             cfg.learner.buffer_size,
             self.env.n_agents,
@@ -189,6 +204,9 @@ class Trainer:
         """Reset a worker's arenas with every value the contexts can take, so a key or a
         range the arena refuses stops the run now rather than mid-way."""
         sets = [{**self.opponent, **x} for x in self.train_contexts.extremes()]
+        sets += [
+            {**self.opponent, **self.competition.contexts(m)} for m in self.competition.pool.fixed
+        ]
         sets += list(self.eval_contexts.values())
         try:
             self.sampler.check_contexts(sets)
@@ -202,6 +220,7 @@ class Trainer:
         restore_rng(payload["rng"], self.np_rng)
         if payload.get("starts") is not None:
             self.starts.load_state_dict(payload["starts"])
+        self.competition.resume(payload.get("opponents"))
         best = self.run_dir / BEST_NAME
         if self.cfg.eval.keep_best and best.is_file():
             chosen = load_checkpoint(best)
@@ -226,6 +245,10 @@ class Trainer:
         self.session_steps = 0
         self.wall_base = self.counters.wall_seconds
         self.sampler.broadcast(self._policy())
+        if self.competition.pool.snapshot_due(0, 0):  # the first snapshot: the start weights
+            self._snapshot()
+        elif self.competition.pool.has_policies:
+            self.sampler.broadcast_opponents(self.competition.policies())
         try:
             if cfg.sync:
                 self._run_sync()
@@ -289,7 +312,12 @@ class Trainer:
             k, cfg.learner.eps_start, cfg.learner.eps_end, cfg.learner.eps_anneal_episodes
         )
         seed = self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed))
-        return Request(seed, eps, {**self.opponent, **self.train_contexts.sample(cfg.seed, k)})
+        contexts = {**self.opponent, **self.train_contexts.sample(cfg.seed, k)}
+        if not self.competition.enabled:
+            return Request(seed, eps, contexts)
+        member = self.competition.pool.draw(k)
+        contexts.update(self.competition.contexts(member))
+        return Request(seed, eps, contexts, opponent=member.id)
 
     def _absorb(self, episodes: list[Episode]) -> None:
         """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
@@ -314,6 +342,8 @@ class Trainer:
                 self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
             c.updates = self.learner.updates
             self.sampler.broadcast(self._policy())
+        if self.competition.pool.snapshot_due(before, c.episodes):
+            self._snapshot()
         self.recorder.advance(c.episodes - before, time.perf_counter() - self.session_start)
         if rounds:
             self.recorder.train(self._train_row())
@@ -335,6 +365,14 @@ class Trainer:
             return 1
         every = self.cfg.learner.train_every
         return after // every - before // every
+
+    def _snapshot(self) -> None:
+        """Add the learner's acting weights to the pool and hand the workers the pool's
+        policies anew."""
+        self.competition.snapshot(
+            self.counters.episodes, self._policy(), self.env, self.counters, self.np_rng
+        )
+        self.sampler.broadcast_opponents(self.competition.policies())
 
     # --- records -----------------------------------------------------------------------
     def _policy(self) -> Policy:
@@ -435,6 +473,7 @@ class Trainer:
             counters=self.counters,
             np_rng=self.np_rng,
             starts=self.starts.state_dict(),
+            opponents=self.competition.state_dict(),
         )
 
 

@@ -244,3 +244,52 @@ def test_episode_in_long_lived_arena_equals_fresh_arena() -> None:
     assert play(used, 13) == play(fresh, 13)
     used.close()
     fresh.close()
+
+
+def _states(arena: Arena, contexts: dict, rows: list[list[int]]) -> list[list[float]]:
+    arena.reset(contexts, seed=11)
+    out = []
+    for row in rows:
+        arena.step(row)
+        out.append(arena.get_state().tolist())
+    return out
+
+
+def test_competitive_bot_team_red_plays_as_the_cooperative_task() -> None:
+    """With ``bot_team="red"`` red's bot drives red and its action rows are ignored, so a
+    competitive arena plays exactly as a cooperative one given blue's same actions."""
+    blue = [[1, 6], [3, 2], [7, 0], [4, 4]]
+    coop, comp = Arena(seed=2), Arena(seed=2, mode="competitive")
+    try:
+        want = _states(coop, {"level": "hard"}, blue)
+        ctx = {"level": "hard", "bot_team": "red"}
+        assert _states(comp, ctx, [[*b, 0, 0] for b in blue]) == want
+        assert _states(comp, ctx, [[*b, 5, 7] for b in blue]) == want
+        assert comp.context.to_dict()["bot_team"] == "red"
+        # without it the caller drives red: its actions move the red robots
+        assert _states(comp, {"level": "hard"}, [[*b, 5, 7] for b in blue]) != want
+    finally:
+        coop.close()
+        comp.close()
+
+
+def test_competitive_bot_team_blue_ignores_blue_rows() -> None:
+    arena = Arena(seed=2, mode="competitive", blue_level="middle")
+    try:
+        red = [[2, 5], [0, 3], [6, 6]]
+        ctx = {"bot_team": "blue"}
+        first = _states(arena, ctx, [[0, 0, *r] for r in red])
+        assert _states(arena, ctx, [[7, 3, *r] for r in red]) == first
+        assert _states(arena, {}, [[7, 3, *r] for r in red]) != first
+    finally:
+        arena.close()
+
+
+@pytest.mark.parametrize("value", ["green", 1, None])
+def test_bad_bot_team_lists_the_choices(value: object) -> None:
+    arena = Arena(seed=1, mode="competitive")
+    try:
+        with pytest.raises(InvalidContextError, match=r"bot_team.*\['none', 'red', 'blue'\]"):
+            arena.reset({"bot_team": value})
+    finally:
+        arena.close()

@@ -157,13 +157,9 @@ def test_bad_blue_level_option_lists_the_valid_values(value) -> None:
 
 def test_command_line_levels() -> None:
     from neuronsmae.server.tools.demo import main as demo
-    from neuronsmae.server.tools.match import main as match
 
     assert tuple(LEVEL_ARGS) == ("0", "1", *LEVEL_NAMES)
-    assert match(["--blue", "1", "--red", "0", "--episodes", "1", "--seed", "3"]) == 0
     assert demo(["--blue", "hard_flank", "--red", "1", "--seed", "3"]) == 0
-    with pytest.raises(SystemExit):
-        match(["--blue", "hard", "--red", "2", "--episodes", "1"])
 
 
 # --- released level 0 / random -------------------------------------------------------------

@@ -19,7 +19,7 @@ def test_every_option_is_documented() -> None:
 
 def test_every_context_key_is_documented() -> None:
     text = (DOCS / "contexts.md").read_text()
-    for key in [*CONTEXT_TABLE, "level"]:
+    for key in [*CONTEXT_TABLE, "level", "bot_team"]:
         assert f"`{key}`" in text, key
 
 

@@ -21,7 +21,6 @@ from neuronsmae.protocol.recording import (
 )
 from neuronsmae.server import Arena
 from neuronsmae.server.render import size as render_size
-from neuronsmae.server.tools import match as M
 from neuronsmae.server.tools import replay as R
 
 SEED, EPISODE_SEED = 5, 77
@@ -148,19 +147,3 @@ def test_mp4_without_imageio_ffmpeg_names_the_extra(
     )
     assert R.main([str(recorded), "--mp4", str(tmp_path / "ep.mp4")]) == 2
     assert "pip install 'neuronsmae[video]'" in capsys.readouterr().err
-
-
-def test_match_records_every_episode_and_draws_the_first(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    drawn: list[int] = []
-    monkeypatch.setattr(M, "write_video", lambda path, frames: drawn.append(len(frames)))
-    out = tmp_path / "rec"
-    result = M.play("hard", "easy", 2, seed=3, record=out, gif=tmp_path / "first.gif")
-    files = sorted(out.glob("*.jsonl.gz"))
-    assert [f.name for f in files] == ["episode_00000_s3.jsonl.gz", "episode_00001_s4.jsonl.gz"]
-    recs = [read_recording(f) for f in files]
-    assert all(r.meta == {"blue": "hard", "red": "easy"} and r.complete for r in recs)
-    assert sum(r.winner == "blue" for r in recs) / 2 == result["blue_win_rate"]
-    assert R.replay(recs[0]).decisions == len(recs[0].decisions)
-    assert drawn == [len(recs[0].decisions) + 1]  # the first episode only, every decision

@@ -29,7 +29,9 @@ def test_the_configuration_is_grouped_and_small() -> None:
     top = [f.name for f in dataclasses.fields(TrainConfig)]
     assert len(top) < 35 and set(GROUPS) <= set(top)
     sizes = {name: len(dataclasses.fields(cls)) for name, cls in GROUPS.items()}
-    assert sizes == {"learner": 22, "eval": 8, "cluster": 8, "experimental": 3}
+    assert sizes == {
+        "learner": 22, "eval": 8, "cluster": 8, "arena": 9, "selfplay": 2, "experimental": 3
+    }  # fmt: skip
     assert len(KEYS) == len(top) - len(GROUPS) + sum(sizes.values())
 
 
@@ -55,7 +57,7 @@ def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
         "main": {"Friction_coeff": 0.5, "coef": 1.0},
         "coef=1.5": {"Friction_coeff": 0.5, "coef": 1.5},
     }
-    assert make_config().learner.augment == "enemies,field,allies"
+    assert make_config().learner.augment == "auto"  # every symmetry the task has
     args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
     assert config_from_args(args).learner.lr == 0.01  # --set still wins over the preset
     with pytest.raises(ConfigError, match="valid: paper"):
@@ -94,7 +96,11 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["level=expert"], "valid: 0, 1, easy, middle, hard, random"),
         (["batch_size=0"], "batch_size must be"),
         (["features=polar"], "valid: raw, relative"),
-        (["features=raw"], "head='points' needs features in .*'relative'"),
+        (["features=raw", "head=points"], "head='points' needs features in .*'relative'"),
+        (["arena.action_space=continuous"], "Q-learners .*valid: abstract, discrete"),
+        (["n_blue=4"], "arena.n_blue must be in"),
+        (["arena.options=mode=bots"], "arena.options sets \\['mode'\\]"),
+        (["opponent=expert"], "opponent entry 'expert'"),
         (["learner=3"], "a group: set learner.<name>"),
         (["eval.lr=1"], "unknown config key 'eval.lr'"),
         (["servers=cloud"], "valid: local, actors"),

@@ -86,3 +86,14 @@ def test_greedy_policy_plays_a_whole_episode(tmp_path: Path) -> None:
     finally:
         arena.close()
     assert taken > 1
+
+
+@pytest.mark.slow
+def test_a_checkpoint_is_evaluated_on_the_task_it_trained_on(tmp_path: Path) -> None:
+    from neuronsmae.trainers.evaluate import evaluate_checkpoint
+    from tests.trainers.checkpoints import make_checkpoint
+
+    path = make_checkpoint(tmp_path / "3v3.pt", 1, n_blue=3, n_red=3, reward="sparse")
+    result = evaluate_checkpoint(path, "random", episodes=2, seed=3, envs=2)
+    assert result["eval_episodes"] == 2 and result["level"] == "random"
+    assert result["mean_return"] in (-1.0, 0.0, 1.0, -0.5, 0.5)  # sparse: ±1 or 0 per episode

@@ -12,6 +12,10 @@ MODULES = (
     "neuronsmae.trainers.features",
     "neuronsmae.trainers.symmetry",
     "neuronsmae.trainers.evaluate",
+    "neuronsmae.trainers.match",
+    "neuronsmae.trainers.league",
+    "neuronsmae.trainers.policies",
+    "neuronsmae.trainers.competition",
 )
 
 

@@ -77,7 +77,7 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     assert second["counters"]["env_steps"] > first["counters"]["env_steps"]
 
     # The match command plays the checkpoint through the registered policy entry point.
-    from neuronsmae.server.tools.match import play
+    from neuronsmae.trainers.match import play
 
     result = play(str(out / "checkpoint.pt"), "easy", 2, 1_000_000_000)
     assert result["episodes"] == 2

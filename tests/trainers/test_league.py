@@ -1,0 +1,65 @@
+"""``neuronsmae-league``: a round robin over policies and bots, rated with OpenSkill."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.trainers.league import Player, expand, main
+from tests.trainers.checkpoints import make_checkpoint
+
+pytestmark = pytest.mark.slow  # plays a few dozen episodes
+
+
+def test_a_run_directory_expands_to_its_snapshots_then_its_checkpoint(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    for name in ("snapshots/self_00000000.pt", "snapshots/self_00000500.pt", "checkpoint.pt"):
+        (run / name).parent.mkdir(parents=True, exist_ok=True)
+        (run / name).write_bytes(b"")
+    players = expand([str(run)], ["easy"])
+    assert [p.name for p in players] == [
+        "run/self_00000000", "run/self_00000500", "run/checkpoint", "bot:easy",
+    ]  # fmt: skip
+    assert players[-1] == Player("easy", "bot:easy")
+    with pytest.raises(InvalidOptionError, match="at least two players"):
+        expand([], ["easy"])
+    with pytest.raises(InvalidOptionError, match="'expert' is not a bot level"):
+        expand([], ["easy", "expert"])
+
+
+def test_a_league_of_three_policies_rates_them_and_draws_the_matrix(tmp_path: Path) -> None:
+    run = tmp_path / "run" / "snapshots"
+    run.mkdir(parents=True)
+    make_checkpoint(run / "self_00000000.pt", 1)
+    make_checkpoint(run / "self_00000010.pt", 2)
+    out = tmp_path / "league"
+    argv = [str(tmp_path / "run"), "--bots", "hard", "--games", "4", "--arenas", "2"]
+    assert main([*argv, "--out", str(out)]) == 0
+    league = json.loads((out / "league.json").read_text())
+    names = ["run/self_00000000", "run/self_00000010", "bot:hard"]
+    assert league["players"] == names
+    assert sorted(r["player"] for r in league["ratings"]) == sorted(names)
+    mus = [r["mu"] for r in league["ratings"]]
+    assert mus == sorted(mus, reverse=True)
+    for row in league["ratings"]:
+        assert row["lo"] < row["mu"] < row["hi"] and row["sigma"] < 25 / 3  # moved from the prior
+    m = league["matrix"]
+    for i in range(3):
+        assert m[i][i] is None
+        for j in range(3):
+            if i != j:
+                assert m[i][j] + m[j][i] == pytest.approx(1.0)
+    # the player that scored most over its games is rated above the one that scored least
+    totals = {names[i]: sum(v for v in m[i] if v is not None) for i in range(3)}
+    order = [r["player"] for r in league["ratings"]]
+    best, worst = max(totals, key=totals.get), min(totals, key=totals.get)
+    assert totals[best] == totals[worst] or order.index(best) < order.index(worst)
+    assert len(league["pairs"]) == 6  # three pairs, each colour once
+    assert sum(p["episodes"] for p in league["pairs"]) == 3 * 4
+    assert "| 1 |" in (out / "league.md").read_text()
+    with Image.open(out / "league.png") as picture:
+        assert picture.size[0] > 200 and picture.size[1] > 200

@@ -1,0 +1,102 @@
+"""``neuronsmae-match``: bots, released levels and checkpoints on either side, in process
+and over a server, with recordings that replay."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.levels import LEVEL_ARGS
+from neuronsmae.protocol.recording import read_recording
+from neuronsmae.server.tools import replay as R
+from neuronsmae.trainers import match as M
+from tests.trainers.checkpoints import make_checkpoint
+
+
+@pytest.fixture(scope="module")
+def checkpoints(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("ckpt")
+    return make_checkpoint(root / "a.pt", 1), make_checkpoint(root / "b.pt", 2)
+
+
+def test_the_match_module_loads_neither_torch_nor_the_simulator() -> None:
+    code = (
+        "import sys, neuronsmae.trainers.match\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'ray', 'pybullet')"
+        " or m.startswith('neuronsmae.server')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120)  # fmt: skip
+    assert out.stdout.strip() == "[]"
+
+
+def test_bot_levels_on_both_sides_from_the_command_line(capsys: pytest.CaptureFixture) -> None:
+    assert M.main(["--blue", "1", "--red", "0", "--episodes", "2", "--seed", "3", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["episodes"] == 2 and len(result["winners"]) == 2
+    assert M.main(["--blue", "hard", "--red", "2", "--episodes", "1"]) == 2
+    assert "'2' is neither a bot level (0, 1, easy" in capsys.readouterr().err
+
+
+def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
+    with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
+        M.play("easy", "nowhere.pt", 1, 0)
+
+
+def test_a_checkpoint_of_another_layout_is_refused(checkpoints: tuple[Path, Path],
+                                                   tmp_path: Path) -> None:  # fmt: skip
+    three = make_checkpoint(tmp_path / "3v3.pt", 3, n_blue=3, n_red=3)
+    with pytest.raises(InvalidOptionError, match=r"--red .*another layout.*team_size: 2 ≠ 3"):
+        M.play(str(three), str(checkpoints[0]), 1, 0)
+
+
+@pytest.mark.slow
+def test_two_checkpoints_in_process_record_replayable_episodes(
+    checkpoints: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    a, b = (str(p) for p in checkpoints)
+    drawn: list[int] = []
+    monkeypatch.setattr(
+        "neuronsmae.server.tools.video.write_video", lambda path, frames: drawn.append(len(frames))
+    )
+    out = tmp_path / "rec"
+    result = M.play(a, b, 3, 5, arenas=2, record=out, gif=tmp_path / "first.gif")
+    files = sorted(out.glob("*.jsonl.gz"))
+    assert [f.name for f in files] == [f"episode_{i:05d}_s{5 + i}.jsonl.gz" for i in range(3)]
+    recs = [read_recording(f) for f in files]
+    assert all(r.complete and r.options["mode"] == "competitive" for r in recs)
+    assert [r.winner for r in recs] == result["winners"]
+    for rec in recs:  # the in-process simulator re-plays every decision identically
+        assert R.replay(rec).decisions == len(rec.decisions)
+    assert drawn == [len(recs[0].decisions) + 1]
+    swapped = M.play(b, a, 3, 5, arenas=3)
+    assert swapped["blue"] == b and len(swapped["winners"]) == 3
+
+
+@pytest.mark.slow
+def test_a_checkpoint_against_every_bot_and_released_level_on_either_side(
+    checkpoints: tuple[Path, Path],
+) -> None:
+    a = str(checkpoints[0])
+    for level in LEVEL_ARGS:
+        as_blue = M.play(a, level, 1, 7, arenas=1)
+        as_red = M.play(level, a, 1, 7, arenas=1)
+        for result in (as_blue, as_red):
+            assert result["winners"][0] in ("blue", "red", "draw")
+            rates = result["blue_win_rate"] + result["red_win_rate"] + result["draw_rate"]
+            assert rates == 1.0
+
+
+@pytest.mark.slow
+def test_over_a_server_the_match_plays_as_in_process(checkpoints: tuple[Path, Path]) -> None:
+    a, b = (str(p) for p in checkpoints)
+    here = M.play(a, b, 3, 11, arenas=3)
+    served = M.play(a, b, 3, 11, arenas=3, servers=1)
+    assert served["winners"] == here["winners"]
+    bot_here = M.play("hard", a, 2, 11, arenas=2)
+    assert M.play("hard", a, 2, 11, arenas=2, servers=2)["winners"] == bot_here["winners"]
