@@ -158,7 +158,7 @@ class Trainer:
             base_seed=base_seed,
             base_port=cfg.cluster.base_port,
             envs_per_worker=cfg.envs_per_worker,
-            groups=2 if cfg.env == "remote" else 1,  # overlap the server's steps and the policy
+            groups=cfg.cluster.groups if cfg.env == "remote" else 1,
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
             env_options=cfg.arena.arena_options(self.mode),

@@ -65,8 +65,10 @@ def _episodes_column(path: Path) -> list[int]:
 def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     out = tmp_path / "run"
     base = ["--alg", "qmix", "--level", "easy", "--workers", "2", "--out", str(out), "--quiet"]
-    assert main([*base, "--episodes", "8", *_sets("eval_every=4")]) == 0
+    # Served arenas (the default env) in two groups stepped in turn.
+    assert main([*base, "--episodes", "8", *_sets("eval_every=4", "cluster.groups=2")]) == 0
     first = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert first["config"]["env"] == "remote" and first["config"]["cluster"]["groups"] == 2
     assert first["counters"]["episodes"] == 8 and first["counters"]["updates"] > 0
     assert first["config"]["alg"] == "qmix" and first["config"]["workers"] == 2
 
