@@ -13,7 +13,8 @@ episode packing that training uses. Rows:
   in this process (one batched forward per decision for all its arenas);
 * **Ray**: the trainers' ``Sampler`` with ``workers`` Ray actors of ``envs`` arenas each,
   ``inprocess`` (a ``VecArena`` in the worker) or ``remote`` (a ``VecRM`` of the worker's
-  own vector server, unpaced), two chunks in flight per worker, ``per_worker`` = total / n.
+  own vector server, unpaced, its arenas in two groups stepped in turn as in training),
+  two chunks in flight per worker, ``per_worker`` = total / n.
 
 **Target: a worker delivers ≥ 0.75 of the bare rate with envs = 8** (the ``ratio`` column:
 per-worker rate / bare rate, medians of the paired rounds). Rounds alternate between every
@@ -129,7 +130,12 @@ def main() -> None:
     try:
         for n, e, kind in combos:
             sampler = Sampler(
-                n, env_kind=kind, base_seed=1000, envs_per_worker=e, worker_cpus=args.worker_cpus
+                n,
+                env_kind=kind,
+                base_seed=1000,
+                envs_per_worker=e,
+                groups=2 if kind == "remote" and e > 1 else 1,  # as the trainer does
+                worker_cpus=args.worker_cpus,
             )
             sampler.broadcast(policy)
             sampler.run([Request(k, EPSILON, CONTEXTS) for k in range(n * e)])  # warm up

@@ -33,7 +33,7 @@ from neuronsmae.protocol.errors import (
     InvalidOptionError,
     ResetNeededError,
 )
-from neuronsmae.protocol.interface import VecArenaAPI, inherit_docstrings
+from neuronsmae.protocol.interface import StepHandle, VecArenaAPI, inherit_docstrings
 from neuronsmae.protocol.launch import ServerCommand, check_launch, ports_of
 from neuronsmae.protocol.messages import (
     MAX_ARENAS,
@@ -182,6 +182,16 @@ class VecRM(VecArenaAPI):
         contexts: Sequence[Mapping[str, Any] | None] | None = None,
         active: Sequence[bool] | np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        return self.step_async(actions, seeds=seeds, contexts=contexts, active=active).result()
+
+    def step_async(
+        self,
+        actions: Any,
+        *,
+        seeds: Sequence[int | None] | None = None,
+        contexts: Sequence[Mapping[str, Any] | None] | None = None,
+        active: Sequence[bool] | np.ndarray | None = None,
+    ) -> StepHandle:
         if not self._started:
             raise ResetNeededError("step() called before reset(): call reset() first")
         rows = self._rows(actions)
@@ -214,11 +224,7 @@ class VecRM(VecArenaAPI):
                 strict=True,
             )
         ]
-        values = self._gather(calls)
-        rewards = np.concatenate([v["rewards"] for v in values])
-        dones = np.concatenate([v["dones"] for v in values])
-        infos = [info for v in values for info in v["infos"]]
-        return self._obs_copy(), rewards, dones, infos
+        return _PendingStep(self, calls)
 
     def get_obs(self) -> np.ndarray:
         return self._read("obs")
@@ -326,6 +332,23 @@ class VecRM(VecArenaAPI):
         for i, contexts in enumerate(per_arena):
             if contexts:
                 check_contexts(contexts, self._table, f"arena {i}: ")
+
+
+class _PendingStep(StepHandle):
+    """A ``vstep`` sent to every server; :meth:`result` gathers and stacks the replies."""
+
+    def __init__(self, vec: VecRM, calls: list[Call]) -> None:
+        super().__init__(None)
+        self._vec, self._calls = vec, calls
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        if self._calls:  # the first call gathers the replies; later ones repeat them
+            values = self._vec._gather(self._calls)
+            rewards = np.concatenate([v["rewards"] for v in values])
+            dones = np.concatenate([v["dones"] for v in values])
+            infos = [info for v in values for info in v["infos"]]
+            self._value, self._calls = (self._vec._obs_copy(), rewards, dones, infos), []
+        return self._value
 
 
 def check_action_rows(rows: Any, info: Mapping[str, Any], clip: bool = False) -> None:

@@ -116,6 +116,17 @@ def inherit_docstrings(cls: type) -> type:
     return cls
 
 
+class StepHandle:
+    """A ``step`` in progress (:meth:`VecArenaAPI.step_async`): :meth:`result` waits for it
+    and returns what ``step`` returns."""
+
+    def __init__(self, value: Any) -> None:
+        self._value = value
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        return self._value
+
+
 class VecArenaAPI(abc.ABC):
     """K arenas stepped together: the contract of the in-process ``VecArena`` and the remote
     ``VecRM``, so that trainers and tests can swap them.
@@ -170,6 +181,22 @@ class VecArenaAPI(abc.ABC):
         the arena and agent, ``InvalidContextError``, or ``ResetNeededError`` before the
         first :meth:`reset`; a refused request changes no arena.
         """
+
+    def step_async(
+        self,
+        actions: Any,
+        *,
+        seeds: Sequence[int | None] | None = None,
+        contexts: Sequence[Mapping[str, Any] | None] | None = None,
+        active: Sequence[bool] | np.ndarray | None = None,
+    ) -> StepHandle:
+        """Start :meth:`step` and return a handle whose ``result()`` gives what ``step``
+        returns. A remote vector sends the request and returns at once, so the caller can
+        work meanwhile (a rollout worker computes the actions of its other arenas while the
+        server steps these, with ``active`` splitting them); in process the step runs here.
+        Several steps may be in flight; call their ``result()`` in the order they were
+        started (each leaves ``get_obs`` and the other reads where its reply left them)."""
+        return StepHandle(self.step(actions, seeds=seeds, contexts=contexts, active=active))
 
     @abc.abstractmethod
     def get_obs(self) -> np.ndarray:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from neuronsmae.protocol.errors import InvalidOptionError
-from neuronsmae.server.contexts import level_error, level_value
+from neuronsmae.protocol.levels import level_error, level_value
 
 ACTION_SPACES = ("abstract", "discrete", "continuous")
 MODES = ("cooperative", "competitive", "bots")

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from neuronsmae.protocol.levels import LEVEL_ARGS
 from neuronsmae.trainers.config_groups import (
     ClusterConfig,
     ConfigError,
@@ -41,6 +42,7 @@ from neuronsmae.trainers.config_groups import (
     check_positive,
     parse_resources,
 )
+from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.experimental.config import ExperimentalConfig
 from neuronsmae.trainers.mixers import ALGORITHMS
 
@@ -59,8 +61,10 @@ __all__ = [
     "read_config_file",
 ]
 
-LEVELS = ("easy", "middle", "hard")
-"""Opponent bot levels of the cooperative task."""
+LEVELS = LEVEL_ARGS
+"""Opponent bots of the cooperative task as a command line gives them: the paper's easy,
+middle and hard, random, this project's variants middle_spread and hard_flank, and the
+released build's levels "0" and "1" (docs/contexts.md, "Bots")."""
 ENV_KINDS = ("inprocess", "remote")
 """``remote``: each worker owns a ``VecRM`` of its own vector server; ``inprocess``: each
 owns a ``VecArena``."""
@@ -73,7 +77,8 @@ class TrainConfig:
     alg: str = "vdn"
     """Algorithm: iql (no mixer), vdn (sum) or qmix (monotonic hypernetwork mixer)."""
     level: str = "easy"
-    """Opponent bot level: easy, middle or hard."""
+    """Red's bot: easy, middle or hard (the paper's), random, middle_spread, hard_flank (this
+    project's variants), or "0" / "1" (the released build's levels)."""
     seed: int = 1
     """Seeds the networks, exploration, replay sampling and the training episodes."""
     episodes: int = 30_000
@@ -90,8 +95,13 @@ class TrainConfig:
     """remote: each worker launches its own vector server (``neuronsmae-server --arenas
     envs_per_worker``, unpaced, on its node's loopback) and plays through a ``VecRM``, the
     design's served path; inprocess: each worker steps a ``VecArena`` in its own process."""
-    coef: float = 1.0
-    """Context 'coef': multiplies the damage the bots deal."""
+    contexts: str = ""
+    """Each training episode's reset contexts beyond ``level``, drawn per episode: ``;``
+    -separated entries ``key=value`` (fixed), ``key=v1,v2,...`` (a uniform choice) or
+    ``key=lo..hi`` (uniform in the range); keys as in docs/contexts.md. Empty: the
+    defaults (coef 1, the chassis defaults). The paper trained at
+    ``Friction_coeff=0.5;coef=0.5``; the released scripts randomised
+    ``coef=0.5,0.7,1,1.4,1.7,2``. See trainers/contexts.py."""
     workers: int = 0
     """Rollout workers (Ray actors); 0 means one per core less one for the learner, and at
     least two. Measured on 2 cores: two half-CPU workers beside the learner play 25 % more
@@ -102,7 +112,11 @@ class TrainConfig:
     agent network per decision for all of them. 8 gives a served arena at least 0.85 of an
     in-process arena's CPU efficiency (``python -m bench.bench_vector``)."""
     sync: bool = False
-    """Paper's loop: one episode from every worker, then learn; else learn as episodes land."""
+    """Paper's loop: play an iteration of episodes, wait for all, then learn; else learn as
+    episodes land (asynchronous)."""
+    iteration_episodes: int = 0
+    """sync: episodes per iteration, spread over the workers; 0 means one per worker. The
+    paper's iteration is 20 (its 20 workers × 1 episode), whatever the worker count here."""
     torch_threads: int = 1
     """Torch intra-op threads for the learner (workers always use 1)."""
     progress: bool = True
@@ -119,6 +133,12 @@ class TrainConfig:
     def __post_init__(self) -> None:
         check_choice("alg", self.alg, sorted(ALGORITHMS))
         check_choice("level", self.level, LEVELS)
+        if self.iteration_episodes < 0:
+            raise ConfigError(f"iteration_episodes must be ≥ 0, got {self.iteration_episodes}")
+        try:
+            ContextSpec.parse(self.contexts)
+        except ContextSpecError as err:
+            raise ConfigError(str(err)) from None
         check_choice("env", self.env, ENV_KINDS)
         check_positive(self, "episodes", "torch_threads", "envs_per_worker")
         if self.envs_per_worker > 64:
@@ -135,6 +155,10 @@ class TrainConfig:
     def run_dir(self) -> Path:
         """The run directory, defaulting to runs/<alg>_<level>_s<seed>."""
         return Path(self.out or f"runs/{self.alg}_{self.level}_s{self.seed}")
+
+    def iteration_size(self, n_workers: int) -> int:
+        """sync: episodes per iteration (``iteration_episodes``, or one per worker)."""
+        return self.iteration_episodes or n_workers
 
     def n_workers(self) -> int:
         """Worker count: as configured, else one per core less one for the learner (≥ 2)."""
@@ -156,26 +180,65 @@ GROUPS: dict[str, type] = {
 
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
-        "learner.lr": 5e-4,
-        "learner.td_lambda": 0.0,
-        "learner.target_update_interval": 5,
+        # the paper's learner: plain observations, linear Q head, one-step targets
         "learner.features": "raw",
         "learner.head": "flat",
+        "learner.td_lambda": 0.0,
         "learner.augment": "none",
+        # the paper's hyper-parameters (stated)
+        "learner.lr": 5e-4,
+        "learner.gamma": 0.99,
+        "learner.eps_start": 0.2,
+        "learner.eps_end": 0.05,
+        "learner.grad_clip": 10.0,
+        "learner.agent_hidden": 128,
+        "learner.mixer_embed": 32,
+        # where the paper is silent: PyMARL's defaults, which its Q-learners follow
+        "learner.eps_anneal_episodes": 1000,
+        "learner.hypernet_hidden": 64,
+        "learner.double_q": True,
+        "learner.last_action_input": True,
+        "learner.agent_id_input": True,
+        "learner.buffer_size": 5000,
+        "learner.batch_size": 32,
+        "learner.learning_starts": 32,
+        # the paper's loop: iterations of 20 episodes, one update each, targets every 5
         "sync": True,
-        "learner.train_every": 1,
+        "iteration_episodes": 20,
         "learner.updates_per_round": 1,
-        "learner.eps_anneal_episodes": 2000,
-        "max_minutes": 0.0,
+        "learner.target_update_interval": 5,
         "episodes": 30_000,
+        "max_minutes": 0.0,
+        "envs_per_worker": 10,
+        # the paper's contexts: trained at μ 0.5 and coef 0.5; tested at coef 1.0 and 1.5
+        "contexts": "Friction_coeff=0.5;coef=0.5",
+        "eval.eval_contexts": "Friction_coeff=0.5;coef=1.0",
+        "eval.extra_test_contexts": "coef=1.5",
+        "eval.eval_every": 1000,
+        "eval.eval_episodes": 50,
+        "eval.final_eval_episodes": 200,
+        "eval.keep_best": False,
     },
 }
-"""Named layers applied before the config file: ``paper`` restores the paper's settings
-(synchronous loop of one episode per worker and one update per iteration, Adam 5e-4,
-one-step targets, targets refreshed every 5 iterations, raw observations, flat Q head, no
-augmentation) where the defaults were tuned to learn within a laptop's half hour; 30 000
-episodes is the paper's 20 workers × 1501 iterations (run it with ``--workers 20`` to
-match)."""
+"""Named layers applied before the config file.
+
+``paper`` is the paper's experiment (docs/results.md, "The paper's benchmark"): its learner
+(the observation as given, a linear Q head on the GRU, one-step double-Q targets, no
+augmentation), its hyper-parameters (Adam 5e-4, γ 0.99, ε 0.2 → 0.05, gradient-norm clip
+10, GRU 128, QMIX mixer 32) and its loop whatever the worker count here: an iteration is 20
+episodes (its 20 sampling workers × 1 episode) followed by one gradient update, the target
+networks are refreshed every 5 iterations, and a run is 30,000 episodes (its 1,501
+iterations × 20). Its contexts: the learning team at μ 0.5 and coef 0.5 in training (the
+released training scripts), evaluation at coef 1.0 (the reported figure) and 1.5.
+
+Where the paper is silent, the preset takes what its algorithms' reference code (PyMARL)
+does: ε falls linearly over 50,000 env steps (1,000 episodes of 50 decisions), QMIX's
+hypernetworks have 64 hidden units, targets use double Q, the agent sees its last action
+and its id, the replay holds 5,000 episodes and an update samples 32, and learning starts
+once 32 are stored. Validation every 1,000 episodes (50 episodes) draws the learning
+curves; the reported figure is the final weights' (no best-of selection). The arenas per
+worker (10) only set how the 20 episodes of an iteration are played on two workers, in
+one wave."""
 
 
 def preset(name: str) -> dict[str, Any]:

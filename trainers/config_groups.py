@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
 from neuronsmae.trainers.symmetry import parse_generators
 
@@ -168,14 +169,38 @@ class EvalConfig:
     the later weights, which trained longer."""
     checkpoint_every: int = 1000
     """Training episodes between checkpoints (one is always written at the end)."""
+    eval_contexts: str = ""
+    """The fixed reset contexts of every evaluation beyond the run's ``level``, as
+    ``key=value`` entries separated by ``;`` (no sets or ranges: every evaluation meets the
+    same task). Empty: the defaults (coef 1)."""
+    extra_test_contexts: str = ""
+    """More fixed context sets for the final test only, separated by ``|`` (each with the
+    syntax of ``eval_contexts``, whose keys it overrides); each is played on the same test
+    seeds and reported beside the main test. The paper's evaluation at coef 1.5 is
+    ``coef=1.5``."""
 
     def __post_init__(self) -> None:
         check_positive(self, "eval_episodes", "final_eval_episodes", "checkpoint_every")
+        for name, spec in self.context_specs().items():
+            if not spec.fixed:
+                raise ConfigError(f"{name} must be fixed contexts (key=value entries only)")
         if self.eval_every < 0 or self.eval_seed < 1:
             raise ConfigError(
                 f"eval_every must be ≥ 0 and eval_seed ≥ 1, got {self.eval_every} and "
                 f"{self.eval_seed}"
             )
+
+    def context_specs(self) -> dict[str, ContextSpec]:
+        """Every evaluation context set by name: ``"main"`` (``eval_contexts``), then each
+        extra test set under its own text (its keys override ``eval_contexts``')."""
+        try:
+            main = ContextSpec.parse(self.eval_contexts)
+            out = {"main": main}
+            for text in filter(None, (t.strip() for t in self.extra_test_contexts.split("|"))):
+                out[text] = main.updated(ContextSpec.parse(text))
+        except ContextSpecError as err:
+            raise ConfigError(str(err)) from None
+        return out
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Run records: CSV files, TensorBoard scalars and the live progress bar, in one place.
 
 CSV is the durable record (``train.csv`` every logged round, ``eval.csv`` every greedy
-evaluation; a resumed run appends), TensorBoard the convenient one, and tqdm shows a person
+evaluation, ``episodes.csv`` every training episode with its contexts; a resumed run
+appends), TensorBoard the convenient one, and tqdm shows a person
 watching the run what it is doing now: episodes, env steps/s, win rate and loss.
 
 A run has two budgets, its episodes and this session's minutes, and stops at whichever runs
@@ -13,6 +14,7 @@ ETA toward 30,000 episodes it will never play.
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,9 +53,14 @@ EVAL_COLUMNS = (
     "eval_episodes",
     "split",
     "weights",
+    "contexts",
 )
 """Columns of ``eval.csv`` (greedy play on held-out seeds): ``split`` is ``validation``
-(periodic) or ``test`` (final); ``weights`` is ``latest`` or ``best`` (see ``keep_best``)."""
+(periodic) or ``test`` (final); ``weights`` is ``latest`` or ``best`` (see ``keep_best``);
+``contexts`` names the evaluation's fixed contexts (``main``, or an extra test set)."""
+EPISODE_COLUMNS = ("episode", "seed", "epsilon", "winner", "return", "length", "contexts")
+"""Columns of ``episodes.csv``: every stored training episode, with the contexts it was
+played with (a JSON map), in the order they were stored."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +136,7 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         self.train_csv = _Csv(run_dir / "train.csv", TRAIN_COLUMNS)
         self.eval_csv = _Csv(run_dir / "eval.csv", EVAL_COLUMNS)
+        self.episodes_csv = _Csv(run_dir / "episodes.csv", EPISODE_COLUMNS)
         self.tb = SummaryWriter(str(run_dir / "tb"))
         self.total, self.first, self.episodes = total_episodes, done_episodes, done_episodes
         self.max_seconds = max_seconds
@@ -157,6 +165,20 @@ class Recorder:
             if row.get(key) is not None:
                 self.tb.add_scalar(f"train/{key}", row[key], step)
         self._postfix(row)
+
+    def episode(self, number: int, info: dict[str, Any], total_reward: float, length: int) -> None:
+        """Record training episode ``number`` (its ``info`` as the worker returned it)."""
+        self.episodes_csv.write(
+            {
+                "episode": number,
+                "seed": info.get("seed"),
+                "epsilon": info.get("epsilon"),
+                "winner": info.get("winner"),
+                "return": round(total_reward, 4),
+                "length": length,
+                "contexts": json.dumps(info.get("contexts", {}), sort_keys=True),
+            }
+        )
 
     def eval(self, row: dict[str, Any]) -> None:
         """Record a greedy evaluation."""
@@ -198,5 +220,7 @@ class Recorder:
         """Flush and close everything."""
         self.bar.close()
         self.tb.close()
+        for table in (self.train_csv, self.eval_csv, self.episodes_csv):
+            table.close()
         self.train_csv.close()
         self.eval_csv.close()

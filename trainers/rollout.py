@@ -16,6 +16,7 @@ Ray call.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ import numpy as np
 import torch
 
 from neuronsmae.protocol import EnvInfo, VecArenaAPI
+from neuronsmae.protocol.interface import StepHandle
 from neuronsmae.trainers.agent import epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.learner import AgentSpec
@@ -153,8 +155,99 @@ class _Track:
         )
 
 
+class _Slots:
+    """A group of a worker's arenas that is stepped together, and what each arena is playing.
+
+    Arenas ``lo .. hi - 1`` of the worker's vector. With two groups, one group's step runs
+    on the server while the worker computes the other group's actions.
+    """
+
+    def __init__(self, worker: RolloutWorker, lo: int, hi: int) -> None:
+        self.worker, self.lo, self.hi = worker, lo, hi
+        k = hi - lo
+        self.tracks: list[_Track | None] = [None] * k
+        self.following: list[tuple[int, Request] | None] = [None] * k
+        """The request an arena whose episode just ended plays next (reset by the next step)."""
+        self.hidden = worker.agent.initial_hidden(k * worker.n_agents)
+        self.last = torch.full((k, worker.n_agents), -1, dtype=torch.int64)
+        self.actions = self.last
+
+    @property
+    def busy(self) -> bool:
+        return any(t is not None for t in self.tracks)
+
+    def start(self, entries: list[tuple[int, Request] | None], obs: np.ndarray,
+              state: np.ndarray, avail: np.ndarray) -> None:  # fmt: skip
+        """The first episode of each arena (None: the arena has nothing to play)."""
+        for i, entry in enumerate(entries):
+            if entry is not None:
+                j = self.lo + i
+                self.tracks[i] = _Track(*entry, obs[j], state[j], avail[j])
+
+    def send(self, spec: AgentSpec, obs: np.ndarray, avail: np.ndarray) -> StepHandle:
+        """Choose every arena's actions (one batched forward) and start the group's step."""
+        w, n, lo, hi = self.worker, self.worker.n_agents, self.lo, self.hi
+        eps = torch.tensor([0.0 if t is None else t.request.epsilon for t in self.tracks])
+        inputs = spec.inputs(torch.from_numpy(obs[lo:hi]), self.last)  # [k, n, D]
+        q, self.hidden = w.agent(inputs.reshape((hi - lo) * n, 1, -1), self.hidden)
+        self.actions = epsilon_greedy(
+            q[:, 0], torch.from_numpy(avail[lo:hi]).reshape((hi - lo) * n, -1),
+            eps.repeat_interleave(n), w.generator,
+        ).reshape(hi - lo, n)  # fmt: skip
+        rows = np.zeros((w.envs, n), dtype=np.int64)
+        rows[lo:hi] = self.actions.numpy()
+        seeds: list[int | None] = [None] * w.envs
+        contexts: list[dict[str, Any] | None] = [None] * w.envs
+        active = np.zeros(w.envs, dtype=bool)
+        for i, (track, nxt) in enumerate(zip(self.tracks, self.following, strict=True)):
+            active[lo + i] = track is not None
+            if nxt is not None:  # this arena resets in this step (next-step autoreset)
+                seeds[lo + i], contexts[lo + i] = nxt[1].seed, dict(nxt[1].contexts)
+        return w.env.step_async(rows, seeds=seeds, contexts=contexts, active=active)
+
+    def receive(
+        self,
+        step: tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]],
+        obs: np.ndarray,
+        state: np.ndarray,
+        avail: np.ndarray,
+        queue: list[tuple[int, Request]],
+        out: list[Episode | None],
+    ) -> None:
+        """Record the step's transitions (``obs``, ``state``, ``avail``: the arenas now);
+        hand finished episodes to ``out`` and the next requests to their arenas."""
+        w, n = self.worker, self.worker.n_agents
+        _, rewards, dones, infos = step
+        actions = self.actions
+        for i, track in enumerate(self.tracks):
+            if track is None:
+                continue
+            j, nxt = self.lo + i, self.following[i]
+            if nxt is not None:  # reset by this step: the new episode's first rows
+                self.tracks[i] = _Track(*nxt, obs[j], state[j], avail[j])
+                self.following[i] = None
+                self.hidden[:, i * n : (i + 1) * n] = 0.0
+                actions[i] = -1
+                continue
+            track.add(actions[i].numpy().copy(), float(np.mean(rewards[j])), obs[j], state[j],
+                      avail[j], blue_alive(infos[j], n))  # fmt: skip
+            if dones[j]:
+                out[track.order] = track.episode(infos[j], w.index)
+                if queue:  # the arena plays the next request, reset by the next step
+                    self.following[i] = queue.pop(0)
+                else:
+                    self.tracks[i] = None
+        self.last = actions
+
+
 class RolloutWorker:
-    """Owns ``envs`` arenas and the acting copy of the shared agent network."""
+    """Owns ``envs`` arenas and the acting copy of the shared agent network.
+
+    ``groups`` (1 or 2) splits the arenas into groups stepped in turn: with a served vector,
+    two groups keep the server busy while the worker computes actions (the worker chooses
+    one group's actions while the server steps the other's arenas). In process there is
+    nothing to overlap, and one group (one forward pass for all arenas) is best.
+    """
 
     def __init__(
         self,
@@ -164,11 +257,13 @@ class RolloutWorker:
         port: int | None,
         env_options: Mapping[str, Any] | None = None,
         envs: int = 1,
+        groups: int = 1,
     ) -> None:
         torch.set_num_threads(1)  # many workers share few cores; one thread each is fastest
         self.index = index
         self.env = open_env(env_kind, env_seed, port, envs, env_options)
         self.envs = envs
+        self.groups = max(1, min(groups, envs))
         info = EnvInfo.from_dict(self.env.get_env_info())
         self.n_agents, self.n_actions = info.n_agents, info.n_actions
         self.spec: AgentSpec | None = None
@@ -205,61 +300,43 @@ class RolloutWorker:
         if not requests:
             return []
         self.set_policy(policy, version)
-        spec, agent, env = policy.spec, self.agent, self.env
+        spec, env, k = policy.spec, self.env, self.envs
         featurize = spec.featurizer()
-        k, n = self.envs, self.n_agents
         queue = list(enumerate(requests))
-        starting = [queue.pop(0) if queue else None for _ in range(k)]
+        first = [queue.pop(0) if queue else None for _ in range(k)]
         obs = featurize(env.reset(
-            [None if s is None else dict(s[1].contexts) for s in starting],
-            [None if s is None else s[1].seed for s in starting],
+            [None if f is None else dict(f[1].contexts) for f in first],
+            [None if f is None else f[1].seed for f in first],
         ))  # fmt: skip
         state, avail = env.get_state(), env.get_avail_actions()
-        tracks: list[_Track | None] = [
-            None if s is None else _Track(s[0], s[1], obs[i], state[i], avail[i])
-            for i, s in enumerate(starting)
-        ]
-        following: list[tuple[int, Request] | None] = [None] * k
-        """The request an arena whose episode just ended plays next (reset in the next step)."""
-        hidden = agent.initial_hidden(k * n)
-        last = torch.full((k, n), -1, dtype=torch.int64)
+        bounds = np.linspace(0, k, self.groups + 1).astype(int)
+        groups = [_Slots(self, lo, hi) for lo, hi in itertools.pairwise(bounds)]
+        for g in groups:
+            g.start(first[g.lo : g.hi], obs, state, avail)
         out: list[Episode | None] = [None] * len(requests)
-        while any(t is not None for t in tracks):
-            eps = torch.tensor([0.0 if t is None else t.request.epsilon for t in tracks])
-            inputs = spec.inputs(torch.from_numpy(obs), last)  # [k, n, D]
-            q, hidden = agent(inputs.reshape(k * n, 1, -1), hidden)
-            actions = epsilon_greedy(
-                q[:, 0], torch.from_numpy(avail).reshape(k * n, -1),
-                eps.repeat_interleave(n), self.generator,
-            ).reshape(k, n)  # fmt: skip
-            seeds = [None if f is None else f[1].seed for f in following]
-            contexts = [None if f is None else dict(f[1].contexts) for f in following]
-            active = np.array([t is not None for t in tracks])
-            raw, rewards, dones, infos = env.step(
-                actions.numpy(), seeds=seeds, contexts=contexts, active=active
-            )
-            obs, state, avail = featurize(raw), env.get_state(), env.get_avail_actions()
-            for i, track in enumerate(tracks):
-                if track is None:
+        pending = [g.send(spec, obs, avail) if g.busy else None for g in groups]
+        while any(p is not None for p in pending):
+            for i, g in enumerate(groups):
+                handle = pending[i]
+                if handle is None:
                     continue
-                nxt = following[i]
-                if nxt is not None:  # reset by this step (next-step autoreset): first rows
-                    tracks[i] = _Track(*nxt, obs[i], state[i], avail[i])
-                    following[i] = None
-                    hidden[:, i * n : (i + 1) * n] = 0.0
-                    actions[i] = -1
-                    continue
-                alive = blue_alive(infos[i], n)
-                track.add(actions[i].numpy().copy(), float(np.mean(rewards[i])), obs[i], state[i],
-                          avail[i], alive)  # fmt: skip
-                if dones[i]:
-                    out[track.order] = track.episode(infos[i], self.index)
-                    if queue:  # the arena plays the next request, reset by the next step
-                        following[i] = queue.pop(0)
-                    else:
-                        tracks[i] = None
-            last = actions
+                step = handle.result()
+                # Only this group's rows changed: take them into fresh copies of the worker's
+                # arrays (the episodes keep views of the old ones).
+                rows = slice(g.lo, g.hi)
+                obs, state, avail = obs.copy(), state.copy(), avail.copy()
+                obs[rows] = featurize(step[0][rows])
+                state[rows], avail[rows] = env.get_state()[rows], env.get_avail_actions()[rows]
+                g.receive(step, obs, state, avail, queue, out)
+                pending[i] = g.send(spec, obs, avail) if g.busy else None
         return [episode for episode in out if episode is not None]
+
+    def check_contexts(self, sets: Sequence[Mapping[str, Any]]) -> None:
+        """Reset the arenas with each context set in turn (the arena raises
+        ``InvalidContextError`` for a key or value it refuses); the next :meth:`run` resets
+        them again."""
+        for contexts in sets:
+            self.env.reset(dict(contexts))
 
     def ping(self) -> int:
         """Answer once ``__init__`` has finished (the env is open)."""

@@ -32,6 +32,7 @@ from typing import Any
 import ray
 from ray.exceptions import GetTimeoutError, RayError
 
+from neuronsmae.protocol import InvalidContextError
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.placement import ServerPool
 from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
@@ -57,6 +58,23 @@ class _Task:
     requests: list[Request]
 
 
+def check_capacity(need: Mapping[str, float], n_workers: int) -> None:
+    """Refuse at once a worker count the Ray cluster can never hold: ``need`` (resource →
+    total amount the workers ask for) beyond the cluster's totals. Resources other runs
+    hold for a while are waited for instead (see ``start_timeout``)."""
+    total = ray.cluster_resources()
+    short = {k: (v, total.get(k, 0.0)) for k, v in need.items() if total.get(k, 0.0) < v - 1e-9}
+    if short:
+        said = ", ".join(
+            f"{k}: {v:g} needed, {have:g} in the cluster" for k, (v, have) in short.items()
+        )
+        raise PlacementError(
+            f"{n_workers} rollout workers cannot be placed ({said}): lower --workers or "
+            "cluster.worker_cpus / cluster.worker_resources, or add nodes (a local Ray "
+            "started by the trainer is sized for its workers)"
+        )
+
+
 def _cause(err: BaseException) -> str:
     """The root error of a Ray failure: the last line of its remote traceback."""
     lines = [line.strip() for line in str(err).splitlines() if line.strip()]
@@ -74,6 +92,7 @@ class Sampler:
         base_seed: int,
         worker_cpus: float,
         envs_per_worker: int = 1,
+        groups: int = 1,
         base_port: int = 0,
         env_options: Mapping[str, Any] | None = None,
         max_failures: int = 5,
@@ -82,12 +101,15 @@ class Sampler:
         servers: ServerPool | None = None,
         start_timeout: float = START_TIMEOUT,
     ) -> None:
-        self.env_kind, self.envs = env_kind, envs_per_worker
+        self.env_kind, self.envs, self.groups = env_kind, envs_per_worker, groups
         self.base_seed, self.base_port = base_seed, base_port
         self.env_options = dict(env_options or {})
         self.max_failures, self.pipeline = max_failures, pipeline
         self.servers = servers
         """Server actors the workers connect to (None: each worker's env finds its own)."""
+        need = {"CPU": n_workers * worker_cpus}
+        need.update({k: n_workers * v for k, v in (worker_resources or {}).items()})
+        check_capacity(need, n_workers)
         self.actor_cls = ray.remote(
             num_cpus=worker_cpus, resources=dict(worker_resources or {}), max_restarts=0
         )(RolloutWorker)
@@ -108,7 +130,7 @@ class Sampler:
             host, port = self.servers.endpoint(i)
             options = {**options, "host": host, "launch": False}
         return self.actor_cls.remote(
-            i, self.env_kind, self.base_seed + i * self.envs, port, options, self.envs
+            i, self.env_kind, self.base_seed + i * self.envs, port, options, self.envs, self.groups
         )
 
     def _await_placement(self, timeout: float) -> None:
@@ -138,6 +160,18 @@ class Sampler:
                 return ray.get(self.actors[i].env_info.remote(), timeout=START_TIMEOUT)
             except (RayError, GetTimeoutError) as err:
                 self._fail(i, self.generation[i], err)
+
+    def check_contexts(self, sets: Sequence[Mapping[str, Any]]) -> None:
+        """Have the first live worker's arenas reset with each context set; the arena's
+        ``InvalidContextError`` (naming the key and what is valid) comes back as is."""
+        i = self._live()[0]
+        try:
+            ray.get(self.actors[i].check_contexts.remote(list(sets)), timeout=START_TIMEOUT)
+        except RayError as err:
+            cause = getattr(err, "cause", None)
+            if isinstance(cause, InvalidContextError):
+                raise cause from None
+            raise
 
     @property
     def n_live(self) -> int:

@@ -33,7 +33,8 @@ import numpy as np
 import ray
 import torch
 
-from neuronsmae.protocol import EnvInfo
+from neuronsmae.protocol import EnvInfo, InvalidContextError
+from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
 from neuronsmae.trainers.checkpoint import (
@@ -44,7 +45,8 @@ from neuronsmae.trainers.checkpoint import (
     restore_rng,
     save_checkpoint,
 )
-from neuronsmae.trainers.config import TrainConfig
+from neuronsmae.trainers.config import ConfigError, TrainConfig
+from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
@@ -97,8 +99,16 @@ class Trainer:
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.torch_threads)
-        self.contexts: dict[str, Any] = {"level": cfg.level, "coef": cfg.coef}
-        """Every episode's reset contexts (the opponent bot and its damage coefficient)."""
+        self.opponent: dict[str, Any] = {"level": level_from_arg(cfg.level)}
+        """The contexts every episode shares: red's bot."""
+        self.train_contexts = ContextSpec.parse(cfg.contexts)
+        """Each training episode's further contexts, drawn per episode."""
+        self.eval_contexts = {
+            name: {**self.opponent, **spec.value()}
+            for name, spec in cfg.eval.context_specs().items()
+        }
+        """Every evaluation's contexts by name: ``main`` (validation and test), then the
+        extra test sets."""
         self.best: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
         """Acting weights of the best validation evaluation, and that evaluation's row."""
         self.owns_ray = not ray.is_initialized()
@@ -135,10 +145,12 @@ class Trainer:
             base_seed=base_seed,
             base_port=cfg.cluster.base_port,
             envs_per_worker=cfg.envs_per_worker,
+            groups=2 if cfg.env == "remote" else 1,  # overlap the server's steps and the policy
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
             **sampler_placement(cfg, n_workers, base_seed),
         )
+        self._check_contexts()
         info = EnvInfo.from_dict(self.sampler.env_info())
         self.env = EnvSpec.of(info, cfg.learner.features)
         self.spec = agent_spec(
@@ -172,6 +184,16 @@ class Trainer:
             self.env.n_actions,
             self.env.episode_limit,
         )
+
+    def _check_contexts(self) -> None:
+        """Reset a worker's arenas with every value the contexts can take, so a key or a
+        range the arena refuses stops the run now rather than mid-way."""
+        sets = [{**self.opponent, **x} for x in self.train_contexts.extremes()]
+        sets += list(self.eval_contexts.values())
+        try:
+            self.sampler.check_contexts(sets)
+        except InvalidContextError as err:
+            raise ConfigError(f"contexts: {err}") from err
 
     def _resume(self) -> None:
         payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
@@ -210,6 +232,10 @@ class Trainer:
             else:
                 self._run_async()
             final = self.evaluate(self.cfg.eval.final_eval_episodes, split="test")
+            extra = {
+                name: self.evaluate(cfg.eval.final_eval_episodes, "test", contexts=name)
+                for name in list(self.eval_contexts)[1:]
+            }
             self.checkpoint()
             best = self._evaluate_best()
         finally:
@@ -217,6 +243,7 @@ class Trainer:
             self.close()
         return {
             "final": final,
+            "extra_tests": extra,
             "best": best,
             "evals": self.evals,
             "counters": asdict(self.counters),
@@ -251,7 +278,7 @@ class Trainer:
     def _run_sync(self) -> None:
         while self._more():
             k = self.counters.episodes
-            n = min(self.sampler.n_live, self.cfg.episodes - k)
+            n = min(self.cfg.iteration_size(self.sampler.n_live), self.cfg.episodes - k)
             self._absorb(
                 self.sampler.run([self._request(k + j) for j in range(n)], self._seconds_left())
             )
@@ -262,7 +289,7 @@ class Trainer:
             k, cfg.learner.eps_start, cfg.learner.eps_end, cfg.learner.eps_anneal_episodes
         )
         seed = self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed))
-        return Request(seed, eps, self.contexts)
+        return Request(seed, eps, {**self.opponent, **self.train_contexts.sample(cfg.seed, k)})
 
     def _absorb(self, episodes: list[Episode]) -> None:
         """Store landed episodes, then learn, evaluate and checkpoint as they fall due."""
@@ -274,6 +301,7 @@ class Trainer:
             self.starts.record(episode.info["seed"], episode.info.get("winner") == "blue")
             self.recent.append(episode)
             c.episodes += 1
+            self.recorder.episode(c.episodes, episode.info, episode.total_reward, episode.length)
             c.env_steps += episode.length
             self.session_steps += episode.length
         c.restarts += self.sampler.restarts - self.seen_restarts
@@ -335,25 +363,29 @@ class Trainer:
         split: str = "validation",
         weights: str = "latest",
         policy: Policy | None = None,
+        contexts: str = "main",
     ) -> dict[str, Any]:
         """Greedy win rate of ``policy`` (default: the learner's latest weights) on held-out
         seeds; recorded and returned.
 
         ``split`` picks the seeds (``validation`` or ``test``, see the module docstring);
-        with ``keep_best``, a validation result better than every earlier one keeps the
-        weights that earned it. Training requests queued afterwards act with the latest
-        weights again; those already in flight keep the weights they were sent with.
+        ``contexts`` names the fixed evaluation contexts (``main``, or an extra test set of
+        ``eval.extra_test_contexts``). With ``keep_best``, a validation result better than
+        every earlier one keeps the weights that earned it. Training requests queued
+        afterwards act with the latest weights again; those already in flight keep the
+        weights they were sent with.
         """
         cfg, c = self.cfg, self.counters
         n = episodes or cfg.eval.eval_episodes
         first = cfg.eval.eval_seed + (TEST_SEED_OFFSET if split == "test" else 0)
         evaluated = policy or self._policy()
         self.sampler.broadcast(evaluated)
-        requests = [Request(first + k, 0.0, self.contexts, "eval") for k in range(n)]
+        context = self.eval_contexts[contexts]
+        requests = [Request(first + k, 0.0, context, "eval") for k in range(n)]
         figures = summarize(self.sampler.run(requests))
         self.sampler.broadcast(self._policy())
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
-        row = {**asdict(c), **figures, "split": split, "weights": weights}
+        row = {**asdict(c), **figures, "split": split, "weights": weights, "contexts": contexts}
         self.recorder.eval(row)
         self.evals.append(row)
         # On a tie the later weights win: they trained longer, and a 50-episode validation

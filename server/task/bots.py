@@ -357,7 +357,7 @@ BOTS: dict[str, Callable[[np.random.Generator], Bot]] = {
     "middle_spread": MiddleSpreadBot,
     "hard_flank": HardFlankBot,
 }
-"""Bot classes by level name (the names of ``neuronsmae.server.contexts.LEVEL_NAMES``)."""
+"""Bot classes by level name (the names of ``neuronsmae.protocol.levels.LEVEL_NAMES``)."""
 
 RELEASED_BOTS: dict[int, Callable[[np.random.Generator], Bot]] = {0: RandomBot, 1: MiddleBot}
 """Bot classes by the released build's level number (``RELEASED_LEVELS``)."""

@@ -11,8 +11,8 @@ import sys
 import time
 from collections.abc import Sequence
 
+from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.contexts import LEVEL_ARGS, level_from_arg
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
+from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.protocol.recording import (
     SUFFIX,
     Decision,
@@ -34,7 +35,6 @@ from neuronsmae.protocol.recording import (
     decision_hash,
 )
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.contexts import LEVEL_ARGS, level_from_arg
 from neuronsmae.server.tools.video import write_video
 
 Z95 = 1.959963984540054

@@ -130,6 +130,7 @@ def test_counts_must_match_the_server(start_server: Callable[..., Server]) -> No
         raw.close()
 
 
+@pytest.mark.slow
 def test_private_servers_run_side_by_side_and_stop_on_close() -> None:
     first, second = VecRM(seed=1, num_envs=2), VecRM(seed=1, num_envs=2, servers=2)
     procs = [c.server.proc for v in (first, second) for c in v._conns if c.server is not None]

@@ -7,16 +7,10 @@ import numpy as np
 import pytest
 
 from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError
+from neuronsmae.protocol.levels import LEVEL_ARGS, LEVEL_CHOICES, LEVEL_NAMES, RELEASED_LEVELS
 from neuronsmae.server import Arena
 from neuronsmae.server.config import ArenaConfig
-from neuronsmae.server.contexts import (
-    LEVEL_ARGS,
-    LEVEL_CHOICES,
-    LEVEL_NAMES,
-    RELEASED_LEVELS,
-    context_table,
-    parse_contexts,
-)
+from neuronsmae.server.contexts import context_table, parse_contexts
 from neuronsmae.server.sim.referee import RED
 from neuronsmae.server.task.bots import (
     BOTS,

@@ -24,7 +24,7 @@ def test_every_context_key_is_documented() -> None:
 
 
 def test_every_level_value_has_a_row_in_the_bots_table() -> None:
-    from neuronsmae.server.contexts import LEVEL_CHOICES
+    from neuronsmae.protocol.levels import LEVEL_CHOICES
 
     text = (DOCS / "contexts.md").read_text()
     bots = text[text.index("## Bots") :]

@@ -29,7 +29,7 @@ def test_the_configuration_is_grouped_and_small() -> None:
     top = [f.name for f in dataclasses.fields(TrainConfig)]
     assert len(top) < 35 and set(GROUPS) <= set(top)
     sizes = {name: len(dataclasses.fields(cls)) for name, cls in GROUPS.items()}
-    assert sizes == {"learner": 22, "eval": 6, "cluster": 8, "experimental": 3}
+    assert sizes == {"learner": 22, "eval": 8, "cluster": 8, "experimental": 3}
     assert len(KEYS) == len(top) - len(GROUPS) + sum(sizes.values())
 
 
@@ -46,6 +46,15 @@ def test_paper_preset_restores_the_papers_hyper_parameters() -> None:
     assert (learner.target_update_interval, learner.td_lambda, learner.features) == (5, 0.0, "raw")
     assert (learner.head, learner.augment, learner.updates_per_round) == ("flat", "none", 1)
     assert (cfg.sync, cfg.max_minutes, cfg.episodes) == (True, 0.0, 30_000)
+    assert (cfg.contexts, cfg.eval.eval_contexts) == (
+        "Friction_coeff=0.5;coef=0.5",
+        "Friction_coeff=0.5;coef=1.0",
+    )
+    tests = cfg.eval.context_specs()
+    assert {k: s.value() for k, s in tests.items()} == {
+        "main": {"Friction_coeff": 0.5, "coef": 1.0},
+        "coef=1.5": {"Friction_coeff": 0.5, "coef": 1.5},
+    }
     assert make_config().learner.augment == "enemies,field,allies"
     args = build_parser().parse_args(["--preset", "paper", "--set", "lr=0.01"])
     assert config_from_args(args).learner.lr == 0.01  # --set still wins over the preset
@@ -82,7 +91,7 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["batch_size=big"], "learner.batch_size expects int"),
         (["double_q=maybe"], "expects a bool"),
         (["alg=mappo"], "valid: iql, qmix, vdn"),
-        (["level=expert"], "valid: easy, middle, hard"),
+        (["level=expert"], "valid: 0, 1, easy, middle, hard, random"),
         (["batch_size=0"], "batch_size must be"),
         (["features=polar"], "valid: raw, relative"),
         (["features=raw"], "head='points' needs features in .*'relative'"),
@@ -208,3 +217,34 @@ def test_default_workers_are_cores_less_one_and_at_least_two(
     monkeypatch.setattr("os.cpu_count", lambda: cores)
     assert make_config({}).n_workers() == workers
     assert make_config({"workers": 5}).n_workers() == 5
+
+
+@pytest.mark.parametrize("workers", [2, 20])
+def test_the_paper_preset_keeps_the_papers_ratios_at_any_worker_count(workers: int) -> None:
+    """An iteration is 20 episodes (the paper's 20 workers × 1) and one update, and the
+    targets are refreshed every 5 iterations, with 2 workers as with 20."""
+    cfg = make_config(preset("paper"), {"workers": workers})
+    episodes_per_iteration = cfg.iteration_size(cfg.n_workers())
+    assert episodes_per_iteration == 20
+    assert cfg.learner.updates_per_round / episodes_per_iteration == 1 / 20
+    refresh_episodes = cfg.learner.target_update_interval * episodes_per_iteration
+    assert refresh_episodes == 100  # 5 iterations
+    assert cfg.episodes // episodes_per_iteration == 1500  # the paper's 1,501 iterations
+
+
+@pytest.mark.parametrize(
+    ("layer", "message"),
+    [
+        ({"contexts": "coef"}, "not key=value"),
+        ({"contexts": "coef=1;coef=2"}, "given twice"),
+        ({"contexts": "Friction_coeff=0.7..0.3"}, "low > high"),
+        ({"contexts": "coef=big"}, "not a number"),
+        ({"eval.eval_contexts": "coef=0.5,1"}, "must be fixed"),
+        ({"eval.extra_test_contexts": "coef=1|coef=0..1"}, "must be fixed"),
+        ({"level": "2"}, "level='2' is not valid"),
+        ({"iteration_episodes": -1}, "iteration_episodes"),
+    ],
+)
+def test_bad_contexts_and_levels_are_config_errors(layer: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        make_config(layer)

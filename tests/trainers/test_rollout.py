@@ -25,11 +25,11 @@ class FailingStep:
     def __init__(self, env: Any, fail_at: int) -> None:
         self.env, self.fail_at, self.steps = env, fail_at, 0
 
-    def step(self, actions: Any, **kwargs: Any) -> Any:
+    def step_async(self, actions: Any, **kwargs: Any) -> Any:
         self.steps += 1
         if self.steps == self.fail_at:
             raise EnvFailure("env server died")
-        return self.env.step(actions, **kwargs)
+        return self.env.step_async(actions, **kwargs)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.env, name)
@@ -122,3 +122,20 @@ def test_exploring_episodes_are_whole_and_keep_their_own_epsilon() -> None:
         assert worker.run(policy, 0, []) == []
     finally:
         worker.close()
+
+
+@pytest.mark.slow
+def test_two_groups_on_a_served_vector_play_what_one_arena_plays(worker: RolloutWorker) -> None:
+    """A served vector of four arenas in two groups, stepped in turn while the worker chooses
+    the other group's actions: each greedy episode equals the in-process one-arena one."""
+    policy, _ = _policy(worker)
+    served = RolloutWorker(3, "remote", env_seed=70, port=None, envs=4, groups=2)
+    try:
+        requests = [Request(300 + k, 0.0, {"level": "hard"}) for k in range(6)]
+        for request, got in zip(requests, served.run(policy, 8, requests), strict=True):
+            want = worker.run_episode(policy, 8, 0.0, request.seed, request.contexts)
+            assert np.array_equal(got.actions, want.actions)
+            assert np.array_equal(got.obs, want.obs) and np.array_equal(got.state, want.state)
+            assert np.array_equal(got.rewards, want.rewards)
+    finally:
+        served.close()

@@ -8,7 +8,9 @@ the plumbing, not learning.
 from __future__ import annotations
 
 import csv
+import json
 import logging
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -19,9 +21,11 @@ import torch
 
 from neuronsmae.trainers.buffer import Batch, Episode
 from neuronsmae.trainers.cli import main
-from neuronsmae.trainers.config import make_config
+from neuronsmae.trainers.config import ConfigError, make_config, preset
+from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
 from neuronsmae.trainers.rollout import Request
+from neuronsmae.trainers.sampler import PlacementError
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
@@ -239,3 +243,89 @@ def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: P
         steps = int(buf.lengths[i])
         assert buf.filled[i, :steps].all() and not buf.filled[i, steps:].any()
         assert buf.terminated[i, steps - 1] == 1
+
+
+def test_the_paper_loop_learns_once_per_iteration_and_refreshes_targets_every_5(
+    tmp_path: Path,
+) -> None:
+    """The paper preset on two workers: iterations of 20 episodes, one update each, the
+    target networks equal to the online ones exactly at every fifth update."""
+    cfg = make_config(
+        preset("paper"),
+        dict(kv.split("=") for kv in TINY),
+        {
+            "workers": 2,
+            "envs_per_worker": 5,
+            "episodes": 160,
+            "out": str(tmp_path),
+            "progress": False,
+            "learning_starts": 20,
+            "eval.eval_every": 0,
+        },
+    )
+    seen: list[tuple[int, int, bool]] = []
+
+    def hook(trainer: Trainer) -> None:
+        learner = trainer.learner
+        same = all(
+            torch.equal(a, b)
+            for a, b in zip(
+                learner.agent.state_dict().values(),
+                learner.target_agent.state_dict().values(),
+                strict=True,
+            )
+        )
+        seen.append((trainer.counters.episodes, learner.updates, same))
+
+    result = Trainer(cfg, hook=hook).run()
+    assert [e for e, _, _ in seen] == list(range(20, 161, 20))
+    assert [u for _, u, _ in seen] == list(range(1, 9))  # one update per iteration
+    assert [same for _, u, same in seen] == [u % 5 == 0 for _, u, _ in seen]
+    assert result["extra_tests"]["coef=1.5"]["contexts"] == "coef=1.5"
+    with (tmp_path / "eval.csv").open() as f:
+        assert {r["contexts"] for r in csv.DictReader(f)} == {"main", "coef=1.5"}
+
+
+def test_each_episode_draws_its_contexts_and_a_resumed_run_draws_the_same(
+    tmp_path: Path,
+) -> None:
+    spec_text = "coef=0.5,1.5;Friction_coeff=0.2..0.4"
+    base = ["--alg", "vdn", "--workers", "2", "--out", str(tmp_path), "--quiet"]
+    assert main([*base, "--episodes", "8", *_sets(f"contexts={spec_text}")]) == 0
+    assert main(["--resume", "--out", str(tmp_path), "--episodes", "12", "--quiet"]) == 0
+    spec = ContextSpec.parse(spec_text)
+    with (tmp_path / "episodes.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    eval_seed = make_config().eval.eval_seed
+    ks = []
+    for row in rows:
+        k = (int(row["seed"]) - 1 * 1_000_003) % eval_seed  # the run seed is 1
+        assert train_seed(1, k, eval_seed) == int(row["seed"])
+        assert json.loads(row["contexts"]) == {"level": "easy", **spec.sample(1, k)}
+        ks.append(k)
+    assert sorted(ks) == list(range(12))  # both sessions, no episode lost or repeated
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    assert saved["config"]["contexts"] == spec_text
+
+
+def test_contexts_the_arena_refuses_stop_the_run_before_it_starts(tmp_path: Path) -> None:
+    cfg = make_config(
+        dict(kv.split("=") for kv in TINY),
+        {"workers": 1, "episodes": 4, "out": str(tmp_path), "contexts": "coef=0.5..20"},
+    )
+    with pytest.raises(ConfigError, match="coef"):
+        Trainer(cfg)
+
+
+def test_a_worker_count_the_cluster_cannot_hold_is_refused_at_once(tmp_path: Path) -> None:
+    """This module's Ray has 2 CPUs: ten half-CPU workers can never be placed."""
+    cfg = make_config(
+        dict(kv.split("=") for kv in TINY),
+        {"workers": 10, "episodes": 4, "out": str(tmp_path), "env": "inprocess"},
+    )
+    start = time.monotonic()
+    with pytest.raises(
+        PlacementError, match=r"10 rollout workers cannot be placed \(CPU: 5 needed"
+    ):
+        Trainer(cfg)
+    assert time.monotonic() - start < 30

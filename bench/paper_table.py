@@ -1,0 +1,205 @@
+"""The paper's table, measured: IQL, VDN, QMIX × easy, middle, hard × seeds, resumable.
+
+    python -m bench.paper_table [--learner paper|defaults] [--seeds 1 2 3]
+                                [--runs runs/table] [--out docs/data/paper_table.json]
+
+``--learner paper`` (the default) trains every cell with ``--preset paper``: the paper's
+learner, hyper-parameters, loop and contexts at its budget of 30,000 episodes, then tests
+the final weights on 200 held-out episodes at coef 1.0 (the reported figure) and at 1.5.
+``--learner defaults`` trains with this project's own learner under a 30-minute budget
+(VDN by default: ``--algs vdn``), tested the same way (coef 1.0, and 1.5 for comparison).
+
+Cells run one at a time, seed-major (every cell's first seed before any second seed), so a
+partial table covers every cell early. Each run has its own directory under ``--runs``; a
+run stopped half-way is resumed from its checkpoint (a time-budgeted run is started afresh:
+its budget is per session), and a run already in ``--out`` is skipped, so the same command
+continues the table after any interruption. After each run one record is written to
+``--out`` (atomically): alg, level, learner, seed, episodes, env steps, updates, wall
+minutes, the test win rate (and draws, losses, return) at each evaluation contexts, the run
+directory, the commit and the machine. ``--env`` picks in-process arenas (the default here:
+the same episodes as served arenas, without a server process competing for the 2 cores) or
+served ones. ``--set KEY=VALUE`` overrides any config key (tests use it for tiny runs).
+Prints the table so far at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
+from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
+from neuronsmae.trainers.train import train
+
+ALGS = ("iql", "vdn", "qmix")
+LEVELS = ("easy", "middle", "hard")
+PAPER = {
+    "easy": {"iql": 0.75, "vdn": 0.93, "qmix": 0.89},
+    "middle": {"iql": 0.48, "vdn": 0.62, "qmix": 0.57},
+    "hard": {"iql": 0.23, "vdn": 0.41, "qmix": 0.34},
+}
+"""The paper's table: win rate against the bot, 2 v 2, abstract actions."""
+DEFAULTS_TESTS = {"eval.extra_test_contexts": "coef=1.5"}
+"""The project's learner is tested at coef 1.5 too, beside the paper preset's runs."""
+
+
+def commit() -> str:
+    """The code's commit: ``$NEURONSMAE_COMMIT`` (set for a snapshot) or git's HEAD."""
+    if os.environ.get("NEURONSMAE_COMMIT"):
+        return os.environ["NEURONSMAE_COMMIT"]
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, timeout=10
+        )
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def cell_config(
+    args: argparse.Namespace, alg: str, level: str, seed: int, run_dir: Path
+) -> TrainConfig:
+    """The configuration of one run of the table."""
+    layers: list[dict[str, Any]] = []
+    if args.learner == "paper":
+        layers.append(preset("paper"))
+    else:
+        layers.append({"max_minutes": args.minutes, **DEFAULTS_TESTS})
+    layers.append(
+        {
+            "alg": alg,
+            "level": level,
+            "seed": seed,
+            "workers": args.workers,
+            "env": args.env,
+            "out": str(run_dir),
+            "progress": sys.stderr.isatty(),
+        }
+    )
+    layers.append(parse_overrides(args.set))
+    return make_config(*layers)
+
+
+def load(path: Path) -> dict[str, Any]:
+    if path.is_file():
+        return json.loads(path.read_text())
+    return {"records": []}
+
+
+def save(path: Path, table: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(table, indent=1))
+    tmp.replace(path)
+
+
+def record(
+    args: argparse.Namespace, alg: str, level: str, seed: int, result: dict[str, Any]
+) -> dict[str, Any]:
+    """One run's line of the table."""
+    counters = result["counters"]
+    tests = {"main": result["final"], **result.get("extra_tests", {})}
+    return {
+        "alg": alg,
+        "level": level,
+        "learner": args.learner,
+        "preset": "paper" if args.learner == "paper" else None,
+        "seed": seed,
+        "episodes": counters["episodes"],
+        "env_steps": counters["env_steps"],
+        "updates": counters["updates"],
+        "wall_minutes": round(counters["wall_seconds"] / 60, 2),
+        "test": {
+            name: {k: row[k] for k in ("win_rate", "draw_rate", "loss_rate", "mean_return")}
+            | {"episodes": row["eval_episodes"]}
+            for name, row in tests.items()
+        },
+        "run_dir": result["run_dir"],
+        "commit": commit(),
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+        },
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[str, Any]:
+    run_dir = args.runs / args.learner / f"{alg}_{level}_s{seed}"
+    cfg = cell_config(args, alg, level, seed, run_dir)
+    if cfg.max_minutes > 0 and run_dir.exists():
+        # A time budget is per session: a resumed run would train past it. Start afresh.
+        shutil.rmtree(run_dir)
+    resume = (run_dir / CHECKPOINT_NAME).is_file()
+    if resume:
+        done = load_checkpoint(run_dir)["counters"]["episodes"]
+        print(f"resuming {run_dir} at {done} episodes", flush=True)
+    else:
+        print(f"starting {run_dir}", flush=True)
+    return record(args, alg, level, seed, train(cfg, resume=resume))
+
+
+def summary(table: dict[str, Any], learner: str) -> str:
+    """The table so far: mean win rate (coef 1.0) over seeds, the seeds, and the paper's."""
+    lines = [f"{'level':7} {'alg':5} {'paper':>6} {'mean':>6}  seeds (win rate at coef 1.0)"]
+    for level in LEVELS:
+        for alg in ALGS:
+            runs = [
+                r
+                for r in table["records"]
+                if r["alg"] == alg and r["level"] == level and r["learner"] == learner
+            ]
+            if not runs:
+                continue
+            rates = [r["test"]["main"]["win_rate"] for r in runs]
+            seeds = ", ".join(f"s{r['seed']}: {r['test']['main']['win_rate']:.3f}" for r in runs)
+            mean = statistics.mean(rates)
+            lines.append(f"{level:7} {alg:5} {PAPER[level][alg]:6.2f} {mean:6.3f}  {seeds}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--learner", choices=("paper", "defaults"), default="paper")
+    p.add_argument("--algs", nargs="+", choices=ALGS, default=None)
+    p.add_argument("--levels", nargs="+", choices=LEVELS, default=list(LEVELS))
+    p.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--env", choices=("inprocess", "remote"), default="inprocess")
+    p.add_argument("--minutes", type=float, default=30.0, help="defaults: budget per run")
+    p.add_argument("--runs", type=Path, default=Path("runs/table"))
+    p.add_argument("--out", type=Path, default=Path("docs/data/paper_table.json"))
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="config override"
+    )
+    args = p.parse_args(argv)
+    algs = args.algs or (list(ALGS) if args.learner == "paper" else ["vdn"])
+    table = load(args.out)
+    for seed in args.seeds:
+        for level in args.levels:
+            for alg in algs:
+                key = (alg, level, seed, args.learner)
+                done = {(r["alg"], r["level"], r["seed"], r["learner"]) for r in table["records"]}
+                if key in done:
+                    continue
+                line = run_cell(args, alg, level, seed)
+                table = load(args.out)  # another process may have added records meanwhile
+                table["records"].append(line)
+                save(args.out, table)
+                print(f"recorded {alg}/{level}/s{seed}: {line['test']}", flush=True)
+    print(summary(table, args.learner))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

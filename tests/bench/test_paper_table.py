@@ -1,0 +1,63 @@
+"""The paper-table runner on a tiny budget: one record per run, resume, skip when done."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import ray
+
+from bench.paper_table import main
+from neuronsmae.trainers.config import make_config, preset
+from neuronsmae.trainers.train import train
+
+pytestmark = [pytest.mark.ray, pytest.mark.slow]
+
+TINY = [
+    "episodes=40", "agent_hidden=16", "mixer_embed=8", "hypernet_hidden=8", "batch_size=4",
+    "learning_starts=4", "eval_every=20", "eval_episodes=2", "final_eval_episodes=3",
+    "envs_per_worker=5", "checkpoint_every=20",
+]  # fmt: skip
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_ray() -> Iterator[None]:
+    ray.init(
+        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+    )
+    yield
+    ray.shutdown()
+
+
+def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    runs, out = tmp_path / "runs", tmp_path / "table.json"
+    sets = [arg for kv in TINY for arg in ("--set", kv)]
+    args = ["--algs", "qmix", "--levels", "hard", "--seeds", "3", "--workers", "2"]
+    args += ["--runs", str(runs), "--out", str(out), *sets]
+    # A run stopped half-way: 20 of its 40 episodes, checkpointed, not recorded.
+    half = make_config(preset("paper"), dict(kv.split("=") for kv in TINY), {
+        "alg": "qmix", "level": "hard", "seed": 3, "workers": 2, "env": "inprocess",
+        "episodes": 20, "out": str(runs / "paper" / "qmix_hard_s3"), "progress": False,
+    })  # fmt: skip
+    train(half)
+    assert main(args) == 0
+    assert "resuming" in capsys.readouterr().out
+    (line,) = json.loads(out.read_text())["records"]
+    assert (line["alg"], line["level"], line["seed"], line["learner"]) == (
+        "qmix",
+        "hard",
+        3,
+        "paper",
+    )
+    assert line["episodes"] == 40 and line["env_steps"] > 0 and line["updates"] == 2
+    assert set(line["test"]) == {"main", "coef=1.5"}
+    assert line["test"]["main"]["episodes"] == 3 and 0 <= line["test"]["main"]["win_rate"] <= 1
+    assert line["commit"] and line["wall_minutes"] > 0
+    assert main(args) == 0  # already recorded: skipped, nothing added
+    assert len(json.loads(out.read_text())["records"]) == 1
+    assert "qmix" in capsys.readouterr().out  # the summary table
