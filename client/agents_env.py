@@ -46,12 +46,12 @@ from gymnasium import spaces
 
 from neuronsmae.client.gym_env import AGENTS_ENV_ID, EpisodeSpec
 from neuronsmae.client.infos import start_info, step_info
-from neuronsmae.client.source import ArenaSource, FirstSeed, open_face
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError
 
 
-class AgentsEnv(EpisodeSpec, gymnasium.Env[tuple[np.ndarray, ...], Sequence[Any]]):
+class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Sequence[Any]]):
     """Every agent of an arena (the blue robots; blue then red in ``mode="competitive"``),
     each with its own space in a ``Tuple``.
 
@@ -70,6 +70,8 @@ class AgentsEnv(EpisodeSpec, gymnasium.Env[tuple[np.ndarray, ...], Sequence[Any]
         contexts: Mapping[str, Any] | None = None,
         **kwargs: Any,
     ) -> None:
+        Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
+                        **kwargs)  # fmt: skip
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
         self.arena, self.layout, seeded = open_face(env, seed, kwargs, render_mode, "AgentsEnv")

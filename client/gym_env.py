@@ -46,7 +46,7 @@ from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
 from neuronsmae.client.infos import start_info, step_info
-from neuronsmae.client.source import ArenaSource, FirstSeed, open_face
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.spaces import Layout
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
@@ -85,7 +85,7 @@ class EpisodeSpec:
         self._spec = value
 
 
-class CoopEnv(EpisodeSpec, gymnasium.Env[np.ndarray, np.ndarray]):
+class CoopEnv(EpisodeSpec, Recipe, gymnasium.Env[np.ndarray, np.ndarray]):
     """All blue robots of a cooperative arena as one Gymnasium environment.
 
     ``CoopEnv()`` launches a private unpaced server; ``CoopEnv(seed=0, action_space=
@@ -112,6 +112,8 @@ class CoopEnv(EpisodeSpec, gymnasium.Env[np.ndarray, np.ndarray]):
         contexts: Mapping[str, Any] | None = None,
         **kwargs: Any,
     ) -> None:
+        Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
+                        **kwargs)  # fmt: skip
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
         self.arena, self.layout, seeded = open_face(

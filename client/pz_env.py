@@ -31,6 +31,9 @@ PettingZoo semantics, as chosen here (see :mod:`neuronsmae.client.spaces` for th
   ``black_death_v3`` turns that back into fixed agents.
 * Rewards are per agent: each robot gets its team's reward, as the arena reports it.
 * Actions are needed for every agent in :attr:`agents`; actions for other names are ignored.
+  A ``step`` after the episode ended (:attr:`agents` empty) returns five empty dicts, as
+  PettingZoo's ``aec_to_parallel`` does; SuperSuit's ``black_death_v3`` makes that step
+  (it sees the end one step late) before the vector environment resets.
 * Infos are numbers and arrays only (:mod:`neuronsmae.client.infos`), from each agent's
   team's point of view, the same keys after ``reset`` as after ``step``;
   :attr:`ArenaParallelEnv.arena_info` is the arena's own last info.
@@ -48,7 +51,7 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.env import AECEnv, ParallelEnv
 
 from neuronsmae.client.infos import copy_info, start_info, step_info
-from neuronsmae.client.source import ArenaSource, FirstSeed, open_face
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
@@ -57,7 +60,7 @@ MASK_FORMS = {"obs": "observation", "rllib": "observations", "info": None}
 """``masks`` → the key of the observation in its Dict (None: a bare Box, masks in infos)."""
 
 
-class ArenaParallelEnv(ParallelEnv[AgentID, Any, Any]):
+class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
     """Every controlled robot of an arena as a PettingZoo parallel agent.
 
     Built like :class:`~neuronsmae.client.gym_env.CoopEnv` (``env``, ``seed``,
@@ -88,6 +91,8 @@ class ArenaParallelEnv(ParallelEnv[AgentID, Any, Any]):
     ) -> None:
         if masks not in MASK_FORMS:
             raise InvalidOptionError(f"masks={masks!r}; valid options: {sorted(MASK_FORMS)}")
+        Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
+                        masks=masks, remove_dead=remove_dead, **kwargs)  # fmt: skip
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
         self.masks, self.remove_dead = masks, bool(remove_dead)
@@ -103,6 +108,8 @@ class ArenaParallelEnv(ParallelEnv[AgentID, Any, Any]):
         }
         self.possible_agents = list(layout.agents)
         self.agents: list[AgentID] = []
+        self._playing = False
+        """Whether an episode was started (the arena refuses a step before the first reset)."""
         # Agent i is robot i (blue first, then red): the arena's per-agent lists and its
         # per-robot ``info["alive"]`` share this index.
         self._robot = {name: i for i, name in enumerate(self.possible_agents)}
@@ -140,6 +147,7 @@ class ArenaParallelEnv(ParallelEnv[AgentID, Any, Any]):
         contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
         obs = self.arena.reset(contexts or None, self._first_seed(seed))
         self.agents = list(self.possible_agents)
+        self._playing = True
         self.arena_info = {}
         start = start_info(self.layout.info, self.arena.get_state())
         observations, masks = self._observe(obs, self.agents)
@@ -156,6 +164,8 @@ class ArenaParallelEnv(ParallelEnv[AgentID, Any, Any]):
         dict[AgentID, dict[str, Any]],
     ]:
         acting = self.agents
+        if not acting and self._playing:  # the episode has ended: nothing acts any more
+            return {}, {}, {}, {}, {}
         missing = [a for a in acting if a not in actions]
         if missing:
             raise InvalidActionError(f"no action for live agent(s) {missing}")

@@ -43,7 +43,7 @@ import numpy as np
 
 from neuronsmae.client.gym_env import _coop
 from neuronsmae.client.infos import start_info, step_info
-from neuronsmae.client.source import ArenaSource, FirstSeed, open_face
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.spaces import Layout
 from neuronsmae.client.viewer import Renderer
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
@@ -58,7 +58,7 @@ def _smac(layout: Layout) -> None:
         )
 
 
-class SMACEnv:
+class SMACEnv(Recipe):
     """A cooperative arena behind SMAC's ``StarCraft2Env`` methods (see the module
     docstring)."""
 
@@ -71,6 +71,8 @@ class SMACEnv:
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
+        Recipe.__init__(self, env=env, seed=seed, contexts=contexts, render_mode=render_mode,
+                        **kwargs)  # fmt: skip
         self.contexts = dict(contexts or {})
         self.arena, self.layout, seeded = open_face(env, seed, kwargs, render_mode, "SMACEnv",
                                                     _smac)  # fmt: skip

@@ -28,15 +28,23 @@ Seeding follows Gymnasium: the first ``reset`` without a seed draws one from the
 system's entropy, so unseeded copies play different episodes, unless a seed was given to
 the constructor (``seed=``, or to the arena the caller built), which then decides every
 episode from the first one on.
+
+A one-arena face pickles as its recipe (:class:`Recipe`, Gymnasium's ``EzPickle``): unpickling
+builds a new environment from the same arguments (its own private server when served), not
+a copy of the running episode. That is how SuperSuit's ``concat_vec_envs_v1`` and others copy
+an environment. A face wrapping an arena object cannot be copied so; a ``"module:attr"``
+name or a factory can.
 """
 
 from __future__ import annotations
 
 import importlib
+import pickle
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import numpy as np
+from gymnasium.utils import EzPickle
 
 from neuronsmae.client.spaces import Layout
 from neuronsmae.client.viewer import check_render_mode
@@ -239,6 +247,23 @@ def open_face(
     if env is None:
         _SERVED_INFO[key] = layout.info.to_dict()
     return arena, layout, seeded
+
+
+class Recipe(EzPickle):
+    """Pickled as the arguments a face was built with (Gymnasium's ``EzPickle``): a face
+    calls ``Recipe.__init__(self, env=env, seed=seed, ...)`` with every argument it was given,
+    and unpickling builds a new face from them."""
+
+    def __getstate__(self) -> dict[str, Any]:
+        env = self._ezpickle_kwargs.get("env")
+        if isinstance(env, (ArenaAPI, VecArenaAPI)):
+            raise pickle.PicklingError(
+                f"{type(self).__name__}(env=<{type(env).__name__} object>) cannot be copied: "
+                "a copy is built anew from the constructor's arguments, and an arena object "
+                "cannot be; give env as None (a private server), a 'module:attr' name such as "
+                "'neuronsmae.server:Arena', or a factory"
+            )
+        return super().__getstate__()  # type: ignore[no-any-return]
 
 
 _SERVED_INFO: dict[str, dict[str, Any]] = {}

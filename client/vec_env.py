@@ -151,8 +151,11 @@ class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         return obs, reward, terminated, truncated, self._vector_info(infos)
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close the arenas (and the servers this environment launched)."""
-        self.vec.close()
+        """Close the arenas (and the servers this environment launched); nothing when
+        construction failed before they were opened."""
+        vec = getattr(self, "vec", None)
+        if vec is not None:
+            vec.close()
 
     def state(self) -> np.ndarray:
         """``[N, S]``: every arena's global state."""

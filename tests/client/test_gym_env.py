@@ -81,10 +81,14 @@ def run_episode(env: Any, seed: int | None, options: dict[str, Any] | None = Non
 @pytest.mark.slow
 def test_check_env_passes_with_default_arguments() -> None:
     # Exactly as a user would: a private unpaced server behind the registered id.
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=WRAPPED)
-        check_env(gymnasium.make("NeuronsMAE/Coop-v0"))
+    env = gymnasium.make("NeuronsMAE/Coop-v0")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            warnings.filterwarnings("ignore", message=WRAPPED)
+            check_env(env)
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -3,6 +3,7 @@ dead robots, mask forms, numeric infos, options, and parity over RM."""
 
 from __future__ import annotations
 
+import pickle
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -17,7 +18,7 @@ from neuronsmae.client import RM, ArenaParallelEnv, parallel_env
 from neuronsmae.client.infos import ROBOT_KEYS, SCALAR_KEYS
 from neuronsmae.client.pz_env import env as aec_env
 from neuronsmae.client.pz_env import raw_env
-from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
+from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError, ResetNeededError
 from neuronsmae.server import Arena
 
 from .conftest import Server, numeric, same
@@ -261,6 +262,34 @@ def test_time_limit_truncates_every_agent(make: Callable[..., ArenaParallelEnv])
     assert next(iter(infos.values()))["t"] == 200
     team = env.arena_info["team_reward"]
     assert rewards == {a: team[0] if a.startswith("blue") else team[1] for a in rewards}
+
+
+def test_a_step_after_the_end_is_empty_and_one_before_the_start_is_refused(
+    make: Callable[..., ArenaParallelEnv],
+) -> None:
+    env = make("discrete")
+    with pytest.raises(ResetNeededError):
+        env.step({})
+    play(env, seed=2)
+    assert env.agents == [] and env.step({}) == ({}, {}, {}, {}, {})
+    assert env.reset(seed=2)[0].keys() == set(env.possible_agents)
+
+
+def test_pickles_as_its_recipe() -> None:
+    env = parallel_env(env=IN_PROCESS, seed=3, masks="info", **SHORT)
+    copy = pickle.loads(pickle.dumps(env))
+    try:
+        assert copy.arena is not env.arena and copy.masks == "info"
+        assert same(env.reset(), copy.reset())  # the constructor's seed decides both
+    finally:
+        env.close()
+        copy.close()
+    held = parallel_env(env=Arena(seed=3, **SHORT))
+    try:
+        with pytest.raises(pickle.PicklingError, match=r"env=<Arena object>.*'module:attr'"):
+            pickle.dumps(held)
+    finally:
+        held.close()
 
 
 def test_actions_needed_for_live_agents_only(make: Callable[..., ArenaParallelEnv]) -> None:
