@@ -31,8 +31,11 @@ Conventions (those ``gymma`` relies on):
   arena's global state to code that wants it.
 
 Pick the arena with ``env`` (:mod:`neuronsmae.client.source`): by default a private unpaced
-server per environment; ``env="neuronsmae.server:Arena"`` runs it in the process (e.g.
-``env_args.env="neuronsmae.server:Arena"``).
+server per environment; ``env="neuronsmae.server:Arena"`` runs it in the process. EPyMARL
+passes no arguments but the key (its configuration refuses keys it does not know), so the
+usual choices have ids of their own (:func:`~neuronsmae.client.gym_env.agents_ids`):
+``NeuronsMAE/Agents-InProcess-v0`` for an arena in the process, ``NeuronsMAE/Agents-hard-v0``
+(``-easy-``, ``-middle-``) for another bot, ``NeuronsMAE/Agents-InProcess-hard-v0`` both.
 """
 
 from __future__ import annotations

@@ -54,6 +54,32 @@ from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 ENV_ID = "NeuronsMAE/Coop-v0"
 AGENTS_ENV_ID = "NeuronsMAE/Agents-v0"
 """The per-agent face (:class:`~neuronsmae.client.agents_env.AgentsEnv`)."""
+PAPER_LEVELS = ("easy", "middle", "hard")
+"""The paper's bots, each with an id of the per-agent face (:func:`agents_ids`)."""
+IN_PROCESS = "neuronsmae.server:Arena"
+"""``env=`` for an arena built in this process."""
+
+
+def agents_ids() -> dict[str, dict[str, Any]]:
+    """The per-agent face's ids and the arguments each one stands for.
+
+    A configuration file may only be able to name an environment, not pass it arguments
+    (EPyMARL's ``gymma`` takes ``env_args.key`` and refuses keys it does not know), so the
+    usual choices have ids of their own, in the manner of lbforaging's
+    ``Foraging-8x8-2p-3f-v3``: ``NeuronsMAE/Agents[-InProcess][-<level>]-v0`` with ``level``
+    one of :data:`PAPER_LEVELS` (red's bot; the default is easy) and ``InProcess`` for an
+    arena in the calling process instead of a private server. For anything else, register
+    an id with ``gymnasium.register(id, entry_point="neuronsmae.client.agents_env:AgentsEnv",
+    kwargs={...})`` in a module of your own and name it ``"yourmodule:YourId"``.
+    """
+    ids: dict[str, dict[str, Any]] = {}
+    for place, env in (("", None), ("InProcess-", IN_PROCESS)):
+        for level in (None, *PAPER_LEVELS):
+            kwargs: dict[str, Any] = {} if env is None else {"env": env}
+            if level is not None:
+                kwargs["contexts"] = {"level": level}
+            ids[f"NeuronsMAE/Agents-{place}{'' if level is None else level + '-'}v0"] = kwargs
+    return ids
 
 
 def _coop(layout: Layout) -> None:
@@ -220,7 +246,8 @@ def register_envs() -> None:
       ``vector_kwargs={"context": "spawn"}``, since Zenoh does not survive ``fork``).
     * ``NeuronsMAE/Agents-v0``: :class:`~neuronsmae.client.agents_env.AgentsEnv`, per-agent
       ``Tuple`` spaces in the convention of EPyMARL's ``gymma`` (registered without
-      Gymnasium's single-agent checker, whose warnings its reward list would trigger).
+      Gymnasium's single-agent checker, whose warnings its reward list would trigger), and
+      its variants for the paper's bots and in-process arenas (:func:`agents_ids`).
 
     Entry points are strings, so registering imports no face and starts nothing. Without
     importing ``neuronsmae.client`` first, use the ids prefixed with ``"neuronsmae.client:"``.
@@ -231,9 +258,11 @@ def register_envs() -> None:
             entry_point="neuronsmae.client.gym_env:CoopEnv",
             vector_entry_point="neuronsmae.client.vec_env:CoopVectorEnv",
         )
-    if AGENTS_ENV_ID not in gymnasium.registry:
-        gymnasium.register(
-            id=AGENTS_ENV_ID,
-            entry_point="neuronsmae.client.agents_env:AgentsEnv",
-            disable_env_checker=True,
-        )
+    for env_id, kwargs in agents_ids().items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point="neuronsmae.client.agents_env:AgentsEnv",
+                disable_env_checker=True,
+                kwargs=kwargs,
+            )

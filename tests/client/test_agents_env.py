@@ -22,7 +22,7 @@ from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 
 from neuronsmae.client import AgentsEnv
-from neuronsmae.client.gym_env import AGENTS_ENV_ID
+from neuronsmae.client.gym_env import AGENTS_ENV_ID, agents_ids
 from neuronsmae.client.infos import SCALAR_KEYS
 from neuronsmae.protocol.errors import InvalidActionError
 from neuronsmae.server import Arena
@@ -81,10 +81,12 @@ def episode(env: gymnasium.Env[Any, Any], rng: np.random.Generator, **reset: Any
 
 
 def test_make_finds_the_key_without_a_prior_import() -> None:
-    code = textwrap.dedent(f"""
+    # The key alone, as EPyMARL passes it (its configuration takes no other arguments).
+    code = textwrap.dedent("""
         import sys, gymnasium
         from gymnasium.wrappers import TimeLimit
-        env = TimeLimit(gymnasium.make({KEY!r}, env={IN_PROCESS!r}, seed=1), 50)
+        env = TimeLimit(gymnasium.make("neuronsmae.client:NeuronsMAE/Agents-InProcess-v0"), 50)
+        assert type(env.unwrapped.arena).__module__ == "neuronsmae.server.arena"
         obs, info = env.reset(seed=1)
         obs, rewards, terminated, truncated, info = env.step([0, 0])
         assert env.unwrapped.n_agents == len(rewards) == 2
@@ -96,6 +98,35 @@ def test_make_finds_the_key_without_a_prior_import() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=180
     )
     assert out.stdout.strip() == "['neuronsmae.client.agents_env', 'neuronsmae.client.gym_env']"
+
+
+def test_the_ids_for_the_paper_bots_and_in_process_arenas() -> None:
+    ids = agents_ids()
+    assert ids["NeuronsMAE/Agents-v0"] == {}
+    assert ids["NeuronsMAE/Agents-hard-v0"] == {"contexts": {"level": "hard"}}
+    assert ids["NeuronsMAE/Agents-InProcess-middle-v0"] == {
+        "env": IN_PROCESS, "contexts": {"level": "middle"}
+    }  # fmt: skip
+    assert len(ids) == 8 and all(i in gymnasium.registry for i in ids)
+
+    def first_steps(env_id: str, level: str) -> list[Any]:
+        env = gymnasium.make(env_id, seed=2, **SHORT)
+        arena = Arena(seed=2, **SHORT)
+        try:
+            assert isinstance(env.unwrapped.arena, Arena)  # type: ignore[attr-defined]
+            out = [env.reset()[0], arena.reset({"level": level})]
+            for _ in range(6):
+                out += [env.step([3, 5])[:2], arena.step([3, 5])[:2]]
+            return out
+        finally:
+            env.close()
+            arena.close()
+
+    hard = first_steps("NeuronsMAE/Agents-InProcess-hard-v0", "hard")
+    assert same(hard[0::2], hard[1::2])
+    easy = first_steps("NeuronsMAE/Agents-InProcess-v0", "easy")
+    assert same(easy[0::2], easy[1::2])
+    assert not same(hard[0::2], easy[0::2])
 
 
 @pytest.mark.parametrize("kind", ["abstract", "discrete"])
