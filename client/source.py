@@ -39,7 +39,6 @@ name or a factory can.
 from __future__ import annotations
 
 import importlib
-import pickle
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -48,7 +47,7 @@ from gymnasium.utils import EzPickle
 
 from neuronsmae.client.spaces import Layout
 from neuronsmae.client.viewer import check_render_mode
-from neuronsmae.protocol.errors import ForkedZenohError, InvalidOptionError
+from neuronsmae.protocol.errors import ForkedZenohError, InvalidOptionError, NotCopyableError
 from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
 from neuronsmae.protocol.link import check_fork_safe
 from neuronsmae.protocol.messages import MAX_SEED
@@ -257,7 +256,7 @@ class Recipe(EzPickle):
     def __getstate__(self) -> dict[str, Any]:
         env = self._ezpickle_kwargs.get("env")
         if isinstance(env, (ArenaAPI, VecArenaAPI)):
-            raise pickle.PicklingError(
+            raise NotCopyableError(
                 f"{type(self).__name__}(env=<{type(env).__name__} object>) cannot be copied: "
                 "a copy is built anew from the constructor's arguments, and an arena object "
                 "cannot be; give env as None (a private server), a 'module:attr' name such as "

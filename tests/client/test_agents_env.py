@@ -24,7 +24,7 @@ from gymnasium.wrappers import TimeLimit
 from neuronsmae.client import AgentsEnv
 from neuronsmae.client.gym_env import AGENTS_ENV_ID, agents_ids
 from neuronsmae.client.infos import SCALAR_KEYS
-from neuronsmae.protocol.errors import InvalidActionError
+from neuronsmae.protocol.errors import InvalidActionError, NotCopyableError
 from neuronsmae.server import Arena
 
 from .conftest import numeric, same
@@ -239,7 +239,7 @@ def test_pickles_as_its_recipe() -> None:
         copy.close()
     held = AgentsEnv(env=Arena(seed=4, **SHORT))
     try:
-        with pytest.raises(pickle.PicklingError, match="arena object cannot be"):
+        with pytest.raises(NotCopyableError, match="arena object cannot be"):
             pickle.dumps(held)
     finally:
         held.close()

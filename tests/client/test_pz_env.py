@@ -18,7 +18,12 @@ from neuronsmae.client import RM, ArenaParallelEnv, parallel_env
 from neuronsmae.client.infos import ROBOT_KEYS, SCALAR_KEYS
 from neuronsmae.client.pz_env import env as aec_env
 from neuronsmae.client.pz_env import raw_env
-from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError, ResetNeededError
+from neuronsmae.protocol.errors import (
+    InvalidActionError,
+    InvalidOptionError,
+    NotCopyableError,
+    ResetNeededError,
+)
 from neuronsmae.server import Arena
 
 from .conftest import Server, numeric, same
@@ -286,7 +291,7 @@ def test_pickles_as_its_recipe() -> None:
         copy.close()
     held = parallel_env(env=Arena(seed=3, **SHORT))
     try:
-        with pytest.raises(pickle.PicklingError, match=r"env=<Arena object>.*'module:attr'"):
+        with pytest.raises(NotCopyableError, match=r"env=<Arena object>.*'module:attr'"):
             pickle.dumps(held)
     finally:
         held.close()
