@@ -9,7 +9,11 @@ import pytest
 from neuronsmae.client import parallel_env
 from neuronsmae.client.infos import ROBOT_KEYS, SCALAR_KEYS
 
-pytestmark = pytest.mark.interop
+pytestmark = [
+    pytest.mark.interop,
+    # TorchRL names the PettingZoo version it was tested with; that is not a finding.
+    pytest.mark.filterwarnings("ignore:PettingZoo in TorchRL is tested:UserWarning"),
+]
 
 pettingzoo_lib = pytest.importorskip("torchrl.envs.libs.pettingzoo")
 utils = pytest.importorskip("torchrl.envs.utils")
