@@ -1,8 +1,10 @@
-"""The client side of NeuronsMAE: :class:`RM`, the remote arena behind the ``ArenaAPI``, and
-:class:`VecRM`, many remote arenas behind the ``VecArenaAPI``.
+"""The client side of NeuronsMAE: :class:`RM`, the remote arena behind the ``ArenaAPI``,
+:class:`VecRM`, many remote arenas behind the ``VecArenaAPI``, and the faces the usual RL
+libraries expect (docs/ecosystem.md).
 
 Depends on :mod:`neuronsmae.protocol` only; a server is reached over Zenoh (and, when none
-answers on a local port, started as a subprocess), never imported.
+answers on a local port, started as a subprocess), never imported — unless a face is told to
+build its arena in this process (``env="neuronsmae.server:Arena"``).
 """
 
 from __future__ import annotations
@@ -12,9 +14,13 @@ from neuronsmae.client.vec_rm import VecRM
 
 __all__ = ["RM", "VecRM", "context_table", "ping"]
 
-# Ecosystem faces (Gymnasium, PettingZoo) over any ArenaAPI; registers NeuronsMAE/Coop-v0.
+# Faces (Gymnasium, PettingZoo, SMAC) over any ArenaAPI; registers the Gymnasium ids
+# NeuronsMAE/Coop-v0 and NeuronsMAE/Agents-v0.
+from neuronsmae.client.agents_env import AgentsEnv
 from neuronsmae.client.gym_env import CoopEnv, register_envs
 from neuronsmae.client.pz_env import ArenaParallelEnv, parallel_env
+from neuronsmae.client.smac import SMACEnv
+from neuronsmae.client.vec_env import CoopVectorEnv
 
-__all__ += ["ArenaParallelEnv", "CoopEnv", "parallel_env"]
+__all__ += ["AgentsEnv", "ArenaParallelEnv", "CoopEnv", "CoopVectorEnv", "SMACEnv", "parallel_env"]
 register_envs()

@@ -2,8 +2,16 @@
 
 One policy observes every blue robot and commands all of them at once, so the team is a
 single Gymnasium agent and any single-agent library (Stable-Baselines3, CleanRL, ...) can
-train it. The red team is the arena's bot. For one learner per robot, or for both teams,
-use the PettingZoo face (:mod:`neuronsmae.client.pz_env`).
+train it. The red team is the arena's bot. For one learner per robot, use the PettingZoo
+face (:mod:`neuronsmae.client.pz_env`), the per-agent Gymnasium face of EPyMARL's ``gymma``
+(:mod:`neuronsmae.client.agents_env`) or the SMAC adapter (:mod:`neuronsmae.client.smac`).
+
+``gymnasium.make("NeuronsMAE/Coop-v0")`` (after ``import neuronsmae.client``; without it,
+the id ``"neuronsmae.client:NeuronsMAE/Coop-v0"``) launches a private, unpaced server on a
+free loopback port and stops it on ``close()``, so any number run side by side;
+``gymnasium.make_vec("NeuronsMAE/Coop-v0", num_envs=N)`` puts N arenas on one vector server
+(:mod:`neuronsmae.client.vec_env`). See :mod:`neuronsmae.client.source` for ``env=``, the
+other keyword arguments and seeding.
 
 Spaces (``n`` blue robots, observation length ``d``; see :mod:`neuronsmae.client.spaces`):
 
@@ -16,27 +24,62 @@ Spaces (``n`` blue robots, observation length ``d``; see :mod:`neuronsmae.client
 * reward: the blue team's reward. The arena gives every blue robot the same team reward,
   so this is any one of them (the first), not their sum, and keeps the arena's scale.
 * ``terminated`` when a team is wiped out, ``truncated`` at the time limit with both teams
-  standing. There is no ``TimeLimit`` wrapper: the arena keeps time itself.
-* info: the arena's ``info`` (``hp``, ``alive``, ``winner``, ``t``, ...) plus the masks,
-  ``info["action_mask"]`` ((n, n_actions) int8: pass ``tuple(mask)`` to
-  ``action_space.sample``) or, for continuous actions, ``info["target_mask"]``
-  ((n, n_enemies)). :meth:`CoopEnv.action_masks` gives sb3-contrib's flat boolean form.
+  standing. The arena keeps time itself; ``spec.max_episode_steps`` (from ``make``) is its
+  ``episode_limit`` in decisions, so a ``TimeLimit`` added on top never cuts earlier.
+* info, after ``reset`` and every ``step`` alike: numbers and arrays only
+  (:mod:`neuronsmae.client.infos`: ``t``, ``battle_won``, ``episode_limit``,
+  ``dead_allies``, ``hp_fraction``, ...) plus the masks, ``info["action_mask"]``
+  ((n, n_actions) int8: pass ``tuple(mask)`` to ``action_space.sample``) or, for continuous
+  actions, ``info["target_mask"]`` ((n, n_enemies)). :meth:`CoopEnv.action_masks` gives
+  sb3-contrib's flat boolean form; :attr:`CoopEnv.arena_info` the arena's own last info.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 
-from neuronsmae.client.spaces import ArenaSource, Layout, open_face
+from neuronsmae.client.infos import start_info, step_info
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
+from neuronsmae.client.spaces import Layout
+from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
 ENV_ID = "NeuronsMAE/Coop-v0"
-RENDER_MODES = ("rgb_array",)
+AGENTS_ENV_ID = "NeuronsMAE/Agents-v0"
+"""The per-agent face (:class:`~neuronsmae.client.agents_env.AgentsEnv`)."""
+PAPER_LEVELS = ("easy", "middle", "hard")
+"""The paper's bots, each with an id of the per-agent face (:func:`agents_ids`)."""
+IN_PROCESS = "neuronsmae.server:Arena"
+"""``env=`` for an arena built in this process."""
+
+
+def agents_ids() -> dict[str, dict[str, Any]]:
+    """The per-agent face's ids and the arguments each one stands for.
+
+    A configuration file may only be able to name an environment, not pass it arguments
+    (EPyMARL's ``gymma`` takes ``env_args.key`` and refuses keys it does not know), so the
+    usual choices have ids of their own, in the manner of lbforaging's
+    ``Foraging-8x8-2p-3f-v3``: ``NeuronsMAE/Agents[-InProcess][-<level>]-v0`` with ``level``
+    one of :data:`PAPER_LEVELS` (red's bot; the default is easy) and ``InProcess`` for an
+    arena in the calling process instead of a private server. For anything else, register
+    an id with ``gymnasium.register(id, entry_point="neuronsmae.client.agents_env:AgentsEnv",
+    kwargs={...})`` in a module of your own and name it ``"yourmodule:YourId"``.
+    """
+    ids: dict[str, dict[str, Any]] = {}
+    for place, env in (("", None), ("InProcess-", IN_PROCESS)):
+        for level in (None, *PAPER_LEVELS):
+            kwargs: dict[str, Any] = {} if env is None else {"env": env}
+            if level is not None:
+                kwargs["contexts"] = {"level": level}
+            ids[f"NeuronsMAE/Agents-{place}{'' if level is None else level + '-'}v0"] = kwargs
+    return ids
 
 
 def _coop(layout: Layout) -> None:
@@ -47,43 +90,80 @@ def _coop(layout: Layout) -> None:
         )
 
 
-class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
+class EpisodeSpec:
+    """``spec`` as Gymnasium's ``make`` sets it, with ``max_episode_steps`` filled in from
+    the arena's ``episode_limit`` (a class attribute shared by the faces)."""
+
+    _spec: EnvSpec | None = None
+    layout: Layout
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The registration ``make`` used (None when built directly), its
+        ``max_episode_steps`` the arena's ``episode_limit`` in decisions."""
+        spec = self._spec
+        if spec is None or spec.max_episode_steps is not None:
+            return spec
+        return dataclasses.replace(spec, max_episode_steps=self.layout.episode_limit)
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        self._spec = value
+
+
+class CoopEnv(EpisodeSpec, Recipe, gymnasium.Env[np.ndarray, np.ndarray]):
     """All blue robots of a cooperative arena as one Gymnasium environment.
 
-    ``CoopEnv(env=Arena(seed=0, action_space="discrete"))`` wraps an in-process arena;
-    ``CoopEnv(env=lambda: Arena(...))`` builds one from a factory, which is what
-    ``gymnasium.make`` needs when it re-creates the environment (``check_env``, vector envs);
-    ``CoopEnv(seed=0, port=10000, action_space="discrete", ...)`` (no ``env``) builds a remote
-    ``RM`` with those arguments, launching a local server if none answers. The environment
-    owns its arena whichever way it came — :meth:`close` closes it — except when construction
-    fails: an arena passed in is then left to the caller.
+    ``CoopEnv()`` launches a private unpaced server; ``CoopEnv(seed=0, action_space=
+    "discrete", ...)`` configures its arena; ``CoopEnv(env="neuronsmae.server:Arena", ...)``
+    builds the arena in this process; ``CoopEnv(env=Arena(...))`` or ``env=lambda:
+    Arena(...)`` wraps the caller's (see :mod:`neuronsmae.client.source`). The environment
+    owns its arena whichever way it came — :meth:`close` closes it — except when
+    construction fails: an arena passed in is then left to the caller.
 
     ``contexts`` are the reset contexts of every episode; ``reset(options={"contexts": ...})``
     updates them for one episode (keys given there win; other option keys are ignored).
+    ``render_mode`` is ``"rgb_array"``, ``"human"`` (a window; :mod:`neuronsmae.client.viewer`)
+    or None.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 2.5}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": [HUMAN, RGB_ARRAY], "render_fps": 2.5}
 
     def __init__(
         self,
         env: ArenaSource = None,
         *,
+        seed: int | None = None,
         render_mode: str | None = None,
         contexts: Mapping[str, Any] | None = None,
-        **rm_kwargs: Any,
+        **kwargs: Any,
     ) -> None:
+        Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
+                        **kwargs)  # fmt: skip
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
-        self.arena, self.layout = open_face(env, rm_kwargs, render_mode, RENDER_MODES, _coop)
+        self.arena, self.layout, seeded = open_face(
+            env, seed, kwargs, render_mode, "CoopEnv", _coop
+        )
         layout = self.layout
+        self._first_seed = FirstSeed(seeded)
         self.n_agents = n = len(layout.agents)
-        self.metadata = {**type(self).metadata, "render_fps": layout.render_fps}
+        """Blue robots, the rows of an observation and of an action."""
+        self.metadata = {
+            **type(self).metadata,
+            "render_modes": render_modes(),
+            "render_fps": layout.render_fps,
+        }
         self.observation_space = layout.obs_space(n)
         self.action_space: spaces.Space[np.ndarray] = (
             layout.motion_box(n) if layout.continuous
             else spaces.MultiDiscrete(np.full(n, layout.n_actions, dtype=np.int64))
         )  # fmt: skip
         self._masks = np.zeros((n, layout.n_actions), dtype=np.int8)
+        self._renderer = Renderer(self.arena.render, render_mode, layout.render_fps, ENV_ID)
+        self.arena_info: dict[str, Any] = {}
+        """The arena's own ``info`` of the last step, unchanged (``winner``, ``components``,
+        ``targets``, ...; see ``ArenaAPI.step``); empty after ``reset``."""
 
     # ---- Gymnasium API ------------------------------------------------------------------
 
@@ -93,30 +173,37 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """Start an episode; ``seed`` re-seeds the arena, as ``ArenaAPI.reset`` does."""
         super().reset(seed=seed)
         contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
-        obs = self.arena.reset(contexts or None, seed)
-        return self._stack(obs), self._mask_info()
+        obs = self.arena.reset(contexts or None, self._first_seed(seed))
+        self.arena_info = {}
+        info = start_info(self.layout.info, self.arena.get_state())
+        self._renderer.update()
+        return self._stack(obs), {**info, **self._mask_info()}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        obs, rewards, done, info = self.arena.step(self._to_arena(action))
-        terminated = bool(done) and self.layout.annihilated(info)
+        obs, rewards, done, raw = self.arena.step(self._to_arena(action))
+        terminated = bool(done) and self.layout.annihilated(raw)
         truncated = bool(done) and not terminated
-        info = {**info, **self._mask_info()}
-        return self._stack(obs), float(rewards[0]), terminated, truncated, info
+        self.arena_info = raw
+        info = step_info(self.layout.info, raw, self.arena.get_state(), 0, truncated)
+        self._renderer.update()
+        return self._stack(obs), float(rewards[0]), terminated, truncated, {
+            **info, **self._mask_info()
+        }  # fmt: skip
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The top-down RGB frame (H × W × 3 uint8) when ``render_mode="rgb_array"``."""
-        if self.render_mode is None:
-            gymnasium.logger.warn(
-                "render() was called without a render_mode; build with render_mode='rgb_array'"
-            )
-            return None
-        return np.asarray(self.arena.render(), dtype=np.uint8)
+        return self._renderer.render()
 
     def close(self) -> None:
         """Close the arena (and the server this environment launched); safe to repeat."""
+        self._renderer.close()
         self.arena.close()
 
-    # ---- masks --------------------------------------------------------------------------
+    # ---- beyond Gymnasium ---------------------------------------------------------------
+
+    def state(self) -> np.ndarray:
+        """The arena's global state (every robot's pose, HP, bullets; the time)."""
+        return np.asarray(self.arena.get_state(), dtype=np.float32)
 
     def action_masks(self) -> np.ndarray:
         """The current masks flattened to booleans, agent after agent: what sb3-contrib's
@@ -150,13 +237,32 @@ class CoopEnv(gymnasium.Env[np.ndarray, np.ndarray]):
 
 
 def register_envs() -> None:
-    """Register ``NeuronsMAE/Coop-v0`` with Gymnasium (idempotent).
+    """Register NeuronsMAE's Gymnasium ids (idempotent).
 
-    The entry point is a string, so registering imports neither this module's dependencies
-    nor a server; ``gymnasium.make("NeuronsMAE/Coop-v0", env=lambda: Arena(...))`` wraps an
-    in-process arena and ``gymnasium.make("NeuronsMAE/Coop-v0", seed=0, port=...)`` a remote
-    one. Without importing ``neuronsmae.client`` first, use the id
-    ``"neuronsmae.client:NeuronsMAE/Coop-v0"``.
+    * ``NeuronsMAE/Coop-v0``: :class:`CoopEnv`; its ``vector_entry_point`` is
+      :class:`~neuronsmae.client.vec_env.CoopVectorEnv`, so ``gymnasium.make_vec`` builds one
+      vector server of N arenas (``vectorization_mode="sync"`` gives N environments with a
+      server each, ``"async"`` the same in subprocesses: pass
+      ``vector_kwargs={"context": "spawn"}``, since Zenoh does not survive ``fork``).
+    * ``NeuronsMAE/Agents-v0``: :class:`~neuronsmae.client.agents_env.AgentsEnv`, per-agent
+      ``Tuple`` spaces in the convention of EPyMARL's ``gymma`` (registered without
+      Gymnasium's single-agent checker, whose warnings its reward list would trigger), and
+      its variants for the paper's bots and in-process arenas (:func:`agents_ids`).
+
+    Entry points are strings, so registering imports no face and starts nothing. Without
+    importing ``neuronsmae.client`` first, use the ids prefixed with ``"neuronsmae.client:"``.
     """
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="neuronsmae.client.gym_env:CoopEnv")
+        gymnasium.register(
+            id=ENV_ID,
+            entry_point="neuronsmae.client.gym_env:CoopEnv",
+            vector_entry_point="neuronsmae.client.vec_env:CoopVectorEnv",
+        )
+    for env_id, kwargs in agents_ids().items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point="neuronsmae.client.agents_env:AgentsEnv",
+                disable_env_checker=True,
+                kwargs=kwargs,
+            )

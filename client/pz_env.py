@@ -3,23 +3,40 @@
 For decentralised learners (independent or parameter-shared policies, MAPPO with
 :meth:`~ArenaParallelEnv.state`) and for self-play: in ``mode="cooperative"`` the agents are
 the blue robots against the arena's bot, in ``mode="competitive"`` blue then red robots.
+PettingZoo's three constructors are here: :func:`parallel_env`, :func:`env` (AEC, with
+PettingZoo's order-enforcing wrapper) and :func:`raw_env` (AEC, bare). With no arguments
+they launch a private unpaced server, stopped on ``close()``; see
+:mod:`neuronsmae.client.source` for ``env=``, ``seed``, the other keyword arguments (unknown
+ones are refused before anything starts) and Gymnasium's entropy seeding.
 
 PettingZoo semantics, as chosen here (see :mod:`neuronsmae.client.spaces` for the spaces):
 
-* Observations are ``Dict({"observation": Box(-1, 1, (d,), float32), <mask>})``, the
-  convention of PettingZoo's classic environments that its tests and the usual trainers
-  read. ``<mask>`` is ``"action_mask"`` (``Box(0, 1, (n_actions,), int8)``) for abstract and
-  discrete actions and ``"target_mask"`` (``(n_enemies,)``) for continuous ones, whose
-  ``Box(4)`` action cannot be sampled with a mask. Masks live only there, never in infos.
-* A destroyed robot is *terminated* in the step it is destroyed (it gets that step's
-  observation, reward and info) and leaves :attr:`agents`; it never comes back. The arena
-  still needs an action for it, so the environment sends its no-op. When a team is wiped out
-  every remaining agent is terminated; at the time limit with both teams standing every
-  remaining agent is truncated. Either way :attr:`agents` is then empty.
+* ``masks`` says where the masks go. ``"obs"`` (the default): observations are
+  ``Dict({"observation": Box(-1, 1, (d,), float32), <mask>})``, the convention of
+  PettingZoo's classic environments, TorchRL's ``PettingZooWrapper`` and the usual
+  trainers. ``"rllib"``: ``Dict({"observations": ..., <mask>})``, the keys of RLlib's
+  action-masking module. ``"info"``: the observation is the bare ``Box`` and the mask is
+  ``infos[agent][<mask>]``, for pipelines that take ``Box`` observations only (SuperSuit's
+  ``black_death_v3`` and ``pettingzoo_env_to_vec_env_v1``). ``<mask>`` is ``"action_mask"``
+  (``Box(0, 1, (n_actions,), int8)``) for abstract and discrete actions and ``"target_mask"``
+  (``(n_enemies,)``) for continuous ones, whose ``Box(4)`` action cannot be sampled with a
+  mask.
+* A destroyed robot stays an agent until the episode ends (as in SMAC): its mask then
+  allows only the no-op, it keeps getting its team's reward, and every agent is terminated
+  together when a team is wiped out, or truncated together at the time limit. So
+  :attr:`agents` is fixed during an episode, which is what TorchRL's default (an episode
+  ends when any agent is done), RLlib and SuperSuit's vector environments expect.
+  ``remove_dead=True`` instead terminates a robot in the step it is destroyed and removes it
+  from :attr:`agents` for good (the environment then sends its no-op); SuperSuit's
+  ``black_death_v3`` turns that back into fixed agents.
 * Rewards are per agent: each robot gets its team's reward, as the arena reports it.
 * Actions are needed for every agent in :attr:`agents`; actions for other names are ignored.
-* Infos are the arena's ``info`` (``hp``, ``alive``, ``winner``, ``t``, ...), one copy per
-  agent; ``reset`` gives empty infos.
+  A ``step`` after the episode ended (:attr:`agents` empty) returns five empty dicts, as
+  PettingZoo's ``aec_to_parallel`` does; SuperSuit's ``black_death_v3`` makes that step
+  (it sees the end one step late) before the vector environment resets.
+* Infos are numbers and arrays only (:mod:`neuronsmae.client.infos`), from each agent's
+  team's point of view, the same keys after ``reset`` as after ``step``;
+  :attr:`ArenaParallelEnv.arena_info` is the arena's own last info.
 """
 
 from __future__ import annotations
@@ -27,33 +44,36 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-import gymnasium
 import numpy as np
 from gymnasium import spaces
-from pettingzoo.utils.env import ParallelEnv
+from pettingzoo.utils import wrappers
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.env import AECEnv, ParallelEnv
 
-from neuronsmae.client.spaces import ArenaSource, open_face
-from neuronsmae.protocol.errors import InvalidActionError
+from neuronsmae.client.infos import copy_info, start_info, step_info
+from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
+from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
+from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
 AgentID = str
-ObsDict = dict[str, np.ndarray]
-RENDER_MODES = ("rgb_array",)
+MASK_FORMS = {"obs": "observation", "rllib": "observations", "info": None}
+"""``masks`` → the key of the observation in its Dict (None: a bare Box, masks in infos)."""
 
 
-class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
+class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
     """Every controlled robot of an arena as a PettingZoo parallel agent.
 
-    Built like :class:`~neuronsmae.client.gym_env.CoopEnv`: ``env=`` an ``ArenaAPI`` instance
-    or a zero-argument factory of one (in-process), or no ``env`` and the ``RM`` arguments
-    (``seed``, ``port``, arena options such as ``mode="competitive"``) for a remote arena. The
-    environment owns its arena (:meth:`close` closes it; a failed construction leaves an arena
-    passed in to the caller). ``contexts`` are every episode's
-    reset contexts; ``reset(options={"contexts": ...})`` updates them for one episode.
+    Built like :class:`~neuronsmae.client.gym_env.CoopEnv` (``env``, ``seed``,
+    ``render_mode``, ``contexts``, then ``RM``'s arguments and the arena options, such as
+    ``mode="competitive"``), plus ``masks`` and ``remove_dead`` (see the module docstring).
+    The environment owns its arena (:meth:`close` closes it; a failed construction leaves an
+    arena passed in to the caller). ``contexts`` are every episode's reset contexts;
+    ``reset(options={"contexts": ...})`` updates them for one episode.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
         "name": "neuronsmae_parallel_v0",
-        "render_modes": list(RENDER_MODES),
+        "render_modes": [HUMAN, RGB_ARRAY],
         "render_fps": 2.5,
         "is_parallelizable": True,
     }
@@ -62,31 +82,53 @@ class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
         self,
         env: ArenaSource = None,
         *,
+        seed: int | None = None,
         render_mode: str | None = None,
         contexts: Mapping[str, Any] | None = None,
-        **rm_kwargs: Any,
+        masks: str = "obs",
+        remove_dead: bool = False,
+        **kwargs: Any,
     ) -> None:
+        if masks not in MASK_FORMS:
+            raise InvalidOptionError(f"masks={masks!r}; valid options: {sorted(MASK_FORMS)}")
+        Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
+                        masks=masks, remove_dead=remove_dead, **kwargs)  # fmt: skip
         self.render_mode = render_mode
         self.contexts = dict(contexts or {})
-        self.arena, self.layout = open_face(env, rm_kwargs, render_mode, RENDER_MODES)
+        self.masks, self.remove_dead = masks, bool(remove_dead)
+        self.arena, self.layout, seeded = open_face(
+            env, seed, kwargs, render_mode, "ArenaParallelEnv"
+        )
         layout = self.layout
-        self.metadata = {**type(self).metadata, "render_fps": layout.render_fps}
+        self._first_seed = FirstSeed(seeded)
+        self.metadata = {
+            **type(self).metadata,
+            "render_modes": render_modes(),
+            "render_fps": layout.render_fps,
+        }
         self.possible_agents = list(layout.agents)
         self.agents: list[AgentID] = []
+        self._playing = False
+        """Whether an episode was started (the arena refuses a step before the first reset)."""
         # Agent i is robot i (blue first, then red): the arena's per-agent lists and its
         # per-robot ``info["alive"]`` share this index.
         self._robot = {name: i for i, name in enumerate(self.possible_agents)}
+        self._team = {name: layout.team_of(i) for i, name in enumerate(self.possible_agents)}
         # One space object per agent, built once: PettingZoo requires the same object on
         # every call (so seeding a space sticks), and separate objects keep their RNGs apart.
-        self.observation_spaces = {
-            a: spaces.Dict(
-                {"observation": layout.obs_space(), layout.mask_key: layout.mask_space()}
-            )
+        key = MASK_FORMS[masks]
+        self.observation_spaces: dict[AgentID, spaces.Space[Any]] = {
+            a: layout.obs_space() if key is None
+            else spaces.Dict({key: layout.obs_space(), layout.mask_key: layout.mask_space()})
             for a in self.possible_agents
-        }
+        }  # fmt: skip
         self.action_spaces = {a: layout.agent_action_space() for a in self.possible_agents}
         self.state_space = layout.state_space()
         """The global state's space: every robot's pose, HP and bullets and the time."""
+        self._renderer = Renderer(self.arena.render, render_mode, layout.render_fps,
+                                  "NeuronsMAE")  # fmt: skip
+        self.arena_info: dict[str, Any] = {}
+        """The arena's own ``info`` of the last step, unchanged; empty after ``reset``."""
 
     # ---- spaces -------------------------------------------------------------------------
 
@@ -100,23 +142,30 @@ class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[AgentID, ObsDict], dict[AgentID, dict[str, Any]]]:
+    ) -> tuple[dict[AgentID, Any], dict[AgentID, dict[str, Any]]]:
         """Start an episode with every possible agent; ``seed`` re-seeds the arena."""
         contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
-        obs = self.arena.reset(contexts or None, seed)
+        obs = self.arena.reset(contexts or None, self._first_seed(seed))
         self.agents = list(self.possible_agents)
-        return self._observe(obs, self.agents), {a: {} for a in self.agents}
+        self._playing = True
+        self.arena_info = {}
+        start = start_info(self.layout.info, self.arena.get_state())
+        observations, masks = self._observe(obs, self.agents)
+        self._renderer.update()
+        return observations, self._infos(self.agents, dict.fromkeys(self.agents, start), masks)
 
     def step(
         self, actions: Mapping[AgentID, Any]
     ) -> tuple[
-        dict[AgentID, ObsDict],
+        dict[AgentID, Any],
         dict[AgentID, float],
         dict[AgentID, bool],
         dict[AgentID, bool],
         dict[AgentID, dict[str, Any]],
     ]:
         acting = self.agents
+        if not acting and self._playing:  # the episode has ended: nothing acts any more
+            return {}, {}, {}, {}, {}
         missing = [a for a in acting if a not in actions]
         if missing:
             raise InvalidActionError(f"no action for live agent(s) {missing}")
@@ -125,16 +174,23 @@ class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
             layout.to_arena(a, actions[a]) if a in acting else layout.noop()
             for a in self.possible_agents
         ]
-        obs, rewards, done, info = self.arena.step(joint)
-        alive = list(info["alive"])
+        obs, rewards, done, raw = self.arena.step(joint)
+        alive = list(raw["alive"])
         ended = bool(done)
-        wiped = ended and layout.annihilated(info)
-        terminations = {a: wiped or not alive[self._robot[a]] for a in acting}
+        wiped = ended and layout.annihilated(raw)
+        if self.remove_dead:
+            terminations = {a: wiped or not alive[self._robot[a]] for a in acting}
+        else:
+            terminations = dict.fromkeys(acting, wiped)
         truncations = {a: ended and not terminations[a] for a in acting}
-        observations = self._observe(obs, acting)
+        self.arena_info = raw
+        state = self.arena.get_state()
+        by_team = [step_info(layout.info, raw, state, t, ended and not wiped) for t in (0, 1)]
+        observations, masks = self._observe(obs, acting)
         reward = {a: float(rewards[self._robot[a]]) for a in acting}
-        infos = {a: dict(info) for a in acting}
+        infos = self._infos(acting, {a: by_team[self._team[a]] for a in acting}, masks)
         self.agents = [a for a in acting if not (terminations[a] or truncations[a])]
+        self._renderer.update()
         return observations, reward, terminations, truncations, infos
 
     def state(self) -> np.ndarray:
@@ -143,32 +199,55 @@ class ArenaParallelEnv(ParallelEnv[AgentID, ObsDict, Any]):
 
     def render(self) -> np.ndarray | None:
         """The top-down RGB frame (H × W × 3 uint8) when ``render_mode="rgb_array"``."""
-        if self.render_mode is None:
-            gymnasium.logger.warn(
-                "render() was called without a render_mode; build with render_mode='rgb_array'"
-            )
-            return None
-        return np.asarray(self.arena.render(), dtype=np.uint8)
+        return self._renderer.render()
 
     def close(self) -> None:
         """Close the arena (and the server this environment launched); safe to repeat."""
+        self._renderer.close()
         self.arena.close()
 
     # ---- helpers ------------------------------------------------------------------------
 
-    def _observe(self, obs: list[np.ndarray], agents: list[AgentID]) -> dict[AgentID, ObsDict]:
-        masks = self.arena.get_avail_actions()
-        key = self.layout.mask_key
-        out = {}
+    def _observe(
+        self, obs: list[np.ndarray], agents: list[AgentID]
+    ) -> tuple[dict[AgentID, Any], dict[AgentID, np.ndarray]]:
+        """Each agent's observation in the ``masks`` form, and each agent's mask."""
+        avail = self.arena.get_avail_actions()
+        masks = {a: np.asarray(avail[self._robot[a]], dtype=np.int8) for a in agents}
+        key = MASK_FORMS[self.masks]
+        out: dict[AgentID, Any] = {}
         for a in agents:
-            i = self._robot[a]
-            out[a] = {
-                "observation": np.asarray(obs[i], dtype=np.float32),
-                key: np.asarray(masks[i], dtype=np.int8),
-            }
-        return out
+            vector = np.asarray(obs[self._robot[a]], dtype=np.float32)
+            out[a] = vector if key is None else {key: vector, self.layout.mask_key: masks[a]}
+        return out, masks
+
+    def _infos(
+        self,
+        agents: list[AgentID],
+        numeric: Mapping[AgentID, Mapping[str, Any]],
+        masks: Mapping[AgentID, np.ndarray],
+    ) -> dict[AgentID, dict[str, Any]]:
+        in_info = MASK_FORMS[self.masks] is None
+        return {
+            a: {**copy_info(numeric[a]), **({self.layout.mask_key: masks[a]} if in_info else {})}
+            for a in agents
+        }
 
 
 def parallel_env(**kwargs: Any) -> ArenaParallelEnv:
-    """PettingZoo's conventional constructor: ``parallel_env(env=lambda: Arena(...))``."""
+    """PettingZoo's parallel constructor: ``parallel_env()`` (a private served arena),
+    ``parallel_env(env="neuronsmae.server:Arena")`` (in process), ``parallel_env(env=lambda:
+    Arena(...))``, with the arguments of :class:`ArenaParallelEnv`."""
     return ArenaParallelEnv(**kwargs)
+
+
+def raw_env(**kwargs: Any) -> AECEnv[AgentID, Any, Any]:
+    """PettingZoo's bare AEC constructor: the parallel environment seen one agent at a time
+    (PettingZoo's ``parallel_to_aec`` conversion, without its wrappers)."""
+    return parallel_to_aec_wrapper(ArenaParallelEnv(**kwargs))
+
+
+def env(**kwargs: Any) -> AECEnv[AgentID, Any, Any]:
+    """PettingZoo's AEC constructor: :func:`raw_env` in PettingZoo's order-enforcing
+    wrapper (an error, not a wrong result, for a call out of order)."""
+    return wrappers.OrderEnforcingWrapper(raw_env(**kwargs))

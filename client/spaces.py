@@ -1,12 +1,15 @@
 """What the Gymnasium and PettingZoo faces share: the arena's layout as spaces, and conversions.
 
-Both faces (:mod:`neuronsmae.client.gym_env`, :mod:`neuronsmae.client.pz_env`) wrap any
-:class:`~neuronsmae.protocol.interface.ArenaAPI` — the in-process ``Arena`` or the remote
-``RM`` — and must agree on how an arena's options become spaces, how a policy's action
-becomes the arena's action, where masks live and when an episode is terminated rather than
-truncated. Keeping those rules here means the two faces cannot drift apart.
+Every face (:mod:`~neuronsmae.client.gym_env`, :mod:`~neuronsmae.client.vec_env`,
+:mod:`~neuronsmae.client.agents_env`, :mod:`~neuronsmae.client.pz_env`,
+:mod:`~neuronsmae.client.smac`) wraps an :class:`~neuronsmae.protocol.interface.ArenaAPI` —
+the in-process ``Arena`` or the remote ``RM`` — or a vector of them, and must agree on how
+an arena's options become spaces, how a policy's action becomes the arena's action, where
+masks live and when an episode is terminated rather than truncated. Keeping those rules
+here means the faces cannot drift apart (:mod:`~neuronsmae.client.source` says where the
+arena comes from, :mod:`~neuronsmae.client.infos` what the infos hold).
 
-Conventions (both faces):
+Conventions (every face):
 
 * Observations are the arena's float32 vectors, every value in [-1, 1].
 * Abstract and discrete actions are ``Discrete(n_actions)`` per agent; the availability mask
@@ -26,7 +29,7 @@ Conventions (both faces):
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,7 +39,7 @@ from gymnasium import spaces
 from neuronsmae.protocol import env_info
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
-from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
 
 PHYSICS_HZ = 50
 """Physics steps per simulated second (1000 steps = 20 s, docs/options.md): sets render_fps."""
@@ -47,55 +50,6 @@ MOTION_LOW = -MOTION_HIGH
 ACTION_MASK = "action_mask"
 TARGET_MASK = "target_mask"
 
-ArenaSource = ArenaAPI | Callable[[], ArenaAPI] | None
-"""What a face wraps: an arena, a zero-argument factory of one, or None for a remote ``RM``."""
-
-
-def open_arena(env: ArenaSource, rm_kwargs: Mapping[str, Any]) -> ArenaAPI:
-    """The arena a face will own: ``env`` itself, ``env()``, or ``RM(**rm_kwargs)``.
-
-    The remote client is imported only here and only when asked for, so wrapping an
-    in-process arena never touches Zenoh. Options are refused alongside a ready arena because
-    they could not apply to it, and silently ignoring them would hide a misconfiguration.
-    """
-    if env is None:
-        from neuronsmae.client.rm import RM
-
-        return RM(**rm_kwargs)
-    if rm_kwargs:
-        raise TypeError(
-            f"options {sorted(rm_kwargs)} only configure the remote arena built when env is "
-            "None; pass them to the arena (or factory) you give as env instead"
-        )
-    arena = env if isinstance(env, ArenaAPI) else env()
-    if not isinstance(arena, ArenaAPI):
-        raise TypeError(f"env must be an ArenaAPI or a factory of one, got {type(arena)!r}")
-    return arena
-
-
-def open_face(
-    env: ArenaSource,
-    rm_kwargs: Mapping[str, Any],
-    render_mode: str | None,
-    render_modes: tuple[str, ...],
-    check: Callable[[Layout], None] | None = None,
-) -> tuple[ArenaAPI, Layout]:
-    """What both faces do first: check ``render_mode``, open the arena, read its layout and
-    run ``check`` on it. If that fails, an arena built here is closed (nobody else could);
-    one the caller passed in stays theirs."""
-    if render_mode is not None and render_mode not in render_modes:
-        raise ValueError(f"render_mode={render_mode!r} is not one of {render_modes} or None")
-    arena = open_arena(env, rm_kwargs)
-    try:
-        layout = Layout.of(arena)
-        if check is not None:
-            check(layout)
-    except BaseException:
-        if not isinstance(env, ArenaAPI):
-            arena.close()
-        raise
-    return arena, layout
-
 
 @dataclass(frozen=True)
 class Layout:
@@ -105,7 +59,8 @@ class Layout:
     """The arena's ``get_env_info()``, parsed."""
 
     @classmethod
-    def of(cls, arena: ArenaAPI) -> Layout:
+    def of(cls, arena: ArenaAPI | VecArenaAPI) -> Layout:
+        """The layout of ``arena`` (one arena, or every arena of a vector: they share it)."""
         layout = cls(EnvInfo.from_dict(arena.get_env_info()))
         if not layout.agents:
             raise InvalidOptionError(
@@ -227,6 +182,33 @@ class Layout:
             )
         index = min(int(np.floor(target)), self.n_enemies - 1)
         return [float(arr[0]), float(arr[1]), float(arr[2]), index]
+
+    def joint_to_arena(self, joint: Any) -> np.ndarray:
+        """:meth:`to_arena` for stacked actions (``[..., n]``, or ``[..., n, 4]`` for
+        continuous actions) at once: the arena's rows, targets read as bins."""
+        if not self.continuous:
+            return np.asarray(joint)
+        arr = np.array(joint, dtype=np.float64)
+        if arr.ndim < 2 or arr.shape[-1] != 4 or not np.isfinite(arr).all():
+            raise InvalidActionError(
+                "continuous actions are rows of 4 finite numbers (vx, vy, omega, target), got "
+                f"shape {arr.shape}"
+            )
+        target = arr[..., 3]
+        bad = np.argwhere((target < 0.0) | (target > self.n_enemies))
+        if len(bad):
+            where = tuple(int(i) for i in bad[0])
+            raise InvalidActionError(
+                f"action {where}: target={target[where]} is outside [0, {self.n_enemies}] "
+                "(enemy i is the bin [i, i + 1))"
+            )
+        arr[..., 3] = np.minimum(np.floor(target), self.n_enemies - 1)
+        return arr
+
+    def team_of(self, agent: int) -> int:
+        """The team of agent ``agent`` (0 blue, 1 red): agents are the blue robots, then (in
+        competitive mode) the red ones."""
+        return 0 if agent < self.info.state.n_blue else 1
 
     def team_split(self, alive: list[bool]) -> tuple[list[bool], list[bool]]:
         """Blue's and red's ``alive`` flags (red is the enemy team of width ``n_enemies``)."""

@@ -136,6 +136,14 @@ class EnvInfoError(NeuronsMAEError, ValueError):
     code = "bad_env_info"
 
 
+class NotCopyableError(NeuronsMAEError, TypeError):
+    """An environment was asked to be pickled (or copied) that cannot be rebuilt from its
+    arguments, such as a face wrapping an arena object; a ``TypeError``, as ``pickle``
+    raises for objects it cannot pickle. The message says what to give instead."""
+
+    code = "not_copyable"
+
+
 class MissingDependencyError(NeuronsMAEError, ImportError):
     """An optional feature needs a package that is not installed; the message names the
     ``pip install 'neuronsmae[extra]'`` that adds it."""

@@ -49,13 +49,9 @@ def _after_fork_in_child() -> None:
 os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
-def open_session(config: zenoh.Config, timeout: float = OPEN_TIMEOUT) -> zenoh.Session:
-    """``zenoh.open(config)`` within ``timeout`` seconds, refused in a forked child.
-
-    Raises :class:`ForkedZenohError`, ``zenoh.ZError`` (Zenoh refused: nothing listens,
-    the port is taken) or :class:`ServerUnavailableError` (no answer in time).
-    """
-    global _used_zenoh
+def check_fork_safe() -> None:
+    """Raise :class:`ForkedZenohError` in a child forked from a process that had opened a
+    Zenoh session (no session can work there); do nothing anywhere else."""
     if _forked_after_use:
         raise ForkedZenohError(
             "this process was forked from one that had opened a Zenoh session, and Zenoh "
@@ -63,6 +59,16 @@ def open_session(config: zenoh.Config, timeout: float = OPEN_TIMEOUT) -> zenoh.S
             "(multiprocessing context 'spawn'; gymnasium.vector.AsyncVectorEnv(..., "
             "context='spawn')) or before the parent opens any session"
         )
+
+
+def open_session(config: zenoh.Config, timeout: float = OPEN_TIMEOUT) -> zenoh.Session:
+    """``zenoh.open(config)`` within ``timeout`` seconds, refused in a forked child.
+
+    Raises :class:`ForkedZenohError`, ``zenoh.ZError`` (Zenoh refused: nothing listens,
+    the port is taken) or :class:`ServerUnavailableError` (no answer in time).
+    """
+    global _used_zenoh
+    check_fork_safe()
     box: dict[str, object] = {}
 
     def run() -> None:

@@ -3,7 +3,9 @@
 ``python -m pytest -q -m "not slow"`` is the quick tier for the edit–test loop; CI runs
 everything. A test is marked here by the fixtures it uses (:data:`SLOW_FIXTURES`, directly
 or through other fixtures) or by the ``ray`` mark; tests that launch processes on their own
-carry ``@pytest.mark.slow`` where they are written.
+carry ``@pytest.mark.slow`` where they are written. Tests that run another framework on
+NeuronsMAE are marked ``interop`` (``-m interop`` runs just them); they need the ``interop``
+extra and are skipped without it.
 """
 
 from __future__ import annotations
@@ -12,10 +14,13 @@ import pytest
 
 SLOW_FIXTURES = frozenset({"start_server", "spawn", "routed", "local_ray", "loopback_ray"})
 """Fixtures that start server or router processes, or Ray."""
+SLOW_MARKS = ("ray", "interop")
+"""Marks that imply ``slow``: a local Ray, another framework run on NeuronsMAE."""
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         fixtures = set(getattr(item, "fixturenames", ()))
-        if fixtures & SLOW_FIXTURES or item.get_closest_marker("ray") is not None:
+        marked = any(item.get_closest_marker(m) is not None for m in SLOW_MARKS)
+        if fixtures & SLOW_FIXTURES or marked:
             item.add_marker(pytest.mark.slow)

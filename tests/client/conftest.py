@@ -124,3 +124,26 @@ def same(a: Any, b: Any) -> bool:
     if isinstance(a, float):
         return type(b) is float and np.float64(a).tobytes() == np.float64(b).tobytes()
     return type(a) is type(b) and a == b
+
+
+@pytest.fixture
+def no_launch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail the test if a face tries to build a remote client (and so launch a server)."""
+
+    def refuse(*args: Any, **kwargs: Any) -> None:
+        raise AssertionError("a server was launched")
+
+    monkeypatch.setattr("neuronsmae.client.rm.RM.__init__", refuse)
+    monkeypatch.setattr("neuronsmae.client.vec_rm.VecRM.__init__", refuse)
+
+
+def numeric(info: dict[str, Any]) -> bool:
+    """Whether every value of an info is a Python bool or number, or a numeric array: what
+    tensor libraries and EPyMARL's summing logger take."""
+    for value in info.values():
+        if isinstance(value, np.ndarray):
+            if value.dtype.kind not in "biuf":
+                return False
+        elif not isinstance(value, (bool, int, float)):
+            return False
+    return True

@@ -1,4 +1,5 @@
-"""The Gymnasium face: ``check_env``, spaces, masks, termination, registration, RM parity."""
+"""The Gymnasium face: ``check_env``, spaces, masks, infos, termination, seeding, options,
+rendering, registration, and parity over RM."""
 
 from __future__ import annotations
 
@@ -14,12 +15,16 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from neuronsmae.client import RM, CoopEnv
+from neuronsmae.client import source as source_module
 from neuronsmae.client.gym_env import ENV_ID
+from neuronsmae.client.infos import ROBOT_KEYS, SCALAR_KEYS
 from neuronsmae.client.spaces import Layout
+from neuronsmae.client.viewer import display_problem
 from neuronsmae.protocol.errors import InvalidActionError, InvalidContextError, InvalidOptionError
 from neuronsmae.server import Arena
+from neuronsmae.server.config import ArenaConfig
 
-from .conftest import Server, free_port, same
+from .conftest import Server, free_port, numeric, same
 
 KINDS = ("abstract", "discrete", "continuous")
 SHORT = {"episode_steps": 200}
@@ -28,6 +33,9 @@ BLUE_LOSES = {"coef": 10.0, "opponent_hp": 10000.0}
 """Contexts under which red wipes blue out within a few decisions."""
 RM_TIMEOUT = 60.0
 """A fresh server JIT-compiles on its first step; on a loaded machine that exceeds 10 s."""
+IN_PROCESS = "neuronsmae.server:Arena"
+WRAPPED = ".*is different from the unwrapped"
+"""check_env's advice to check ``env.unwrapped`` when given what ``make`` returns."""
 
 
 def arena_factory(kind: str, **options: Any) -> Callable[[], Arena]:
@@ -50,10 +58,10 @@ def make() -> Iterator[Callable[..., CoopEnv]]:
         env.close()
 
 
-def run_episode(env: CoopEnv, seed: int, options: dict[str, Any] | None = None) -> list[Any]:
+def run_episode(env: Any, seed: int | None, options: dict[str, Any] | None = None) -> list[Any]:
     """Random masked actions until the episode ends; returns every step's 5-tuple."""
     _, info = env.reset(seed=seed, options=options)
-    env.action_space.seed(seed)
+    env.action_space.seed(0 if seed is None else seed)
     steps = []
     while True:
         if isinstance(env.action_space, gymnasium.spaces.MultiDiscrete):
@@ -70,6 +78,19 @@ def run_episode(env: CoopEnv, seed: int, options: dict[str, Any] | None = None) 
 # ---- the checkers ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
+def test_check_env_passes_with_default_arguments() -> None:
+    # Exactly as a user would: a private unpaced server behind the registered id.
+    env = gymnasium.make("NeuronsMAE/Coop-v0")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            warnings.filterwarnings("ignore", message=WRAPPED)
+            check_env(env)
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_check_env_passes_without_warnings(kind: str) -> None:
     # Through gymnasium.make with a factory, so check_env also re-creates the environment for
@@ -81,6 +102,22 @@ def test_check_env_passes_without_warnings(kind: str) -> None:
             check_env(env.unwrapped)
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_default_instances_run_side_by_side() -> None:
+    envs = [gymnasium.make(ENV_ID) for _ in range(2)]
+    try:
+        ports = {env.unwrapped.arena.port for env in envs}  # type: ignore[attr-defined]
+        assert len(ports) == 2
+        # Unseeded: each first episode seeded from entropy, so the two differ.
+        first = [env.reset()[0] for env in envs]
+        assert not np.array_equal(first[0], first[1])
+        for env in envs:
+            env.step(env.action_space.sample())
+    finally:
+        for env in envs:
+            env.close()
 
 
 # ---- spaces and actions ---------------------------------------------------------------------
@@ -115,9 +152,13 @@ def test_continuous_target_is_read_as_a_bin(make: Callable[..., CoopEnv]) -> Non
     cases = {0.0: 0, 0.999: 0, 1.0: 1, 2.5: 2, 3.0: 2}  # the upper edge is the last enemy
     for target, enemy in cases.items():
         assert layout.to_arena("blue_0", np.array([1, -1, 0.5, target])) == [1.0, -1.0, 0.5, enemy]
+    rows = layout.joint_to_arena(np.array([[[1, -1, 0.5, t] for t in cases]]))
+    np.testing.assert_array_equal(rows[0, :, 3], list(cases.values()))
     for bad in (-0.01, 3.01, float("nan")):
         with pytest.raises(InvalidActionError, match="blue_0"):
             layout.to_arena("blue_0", [0, 0, 0, bad])
+        with pytest.raises(InvalidActionError, match=r"target|finite"):
+            layout.joint_to_arena(np.array([[[0, 0, 0, bad]]]))
 
 
 def test_bad_joint_actions_raise_with_the_expected_shape(make: Callable[..., CoopEnv]) -> None:
@@ -133,7 +174,7 @@ def test_bad_joint_actions_raise_with_the_expected_shape(make: Callable[..., Coo
         cont.step(np.array([[5.0, 0, 0, 0], [0, 0, 0, 0]], dtype=np.float32))
 
 
-# ---- rewards, termination, truncation -------------------------------------------------------
+# ---- infos, rewards, termination, truncation ------------------------------------------------
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -142,11 +183,14 @@ def test_time_limit_truncates(make: Callable[..., CoopEnv], kind: str) -> None:
     steps = run_episode(env, seed=3)
     *_, (_, reward, terminated, truncated, info) = steps
     assert truncated and not terminated
-    assert info["t"] == 200 and info["winner"] is not None
+    assert info["t"] == 200 and info["episode_limit"]
+    assert env.arena_info["winner"] is not None
     assert all(not (s[2] or s[3]) for s in steps[:-1])
+    assert not any(s[4]["episode_limit"] for s in steps[:-1])
     assert len(steps) == env.arena.get_env_info()["episode_limit"]
     # The team reward: every blue robot's reward, not their sum.
-    assert reward == info["team_reward"][0]
+    assert reward == env.arena_info["team_reward"][0]
+    assert info["battle_won"] == (env.arena_info["winner"] == "blue")
 
 
 def test_annihilation_terminates(make: Callable[..., CoopEnv]) -> None:
@@ -155,24 +199,110 @@ def test_annihilation_terminates(make: Callable[..., CoopEnv]) -> None:
         env, seed=5, options={"contexts": BLUE_LOSES}
     )
     assert terminated and not truncated
-    assert info["winner"] == "red" and not any(info["alive"][:2])
-    assert info["t"] < 3000 and reward == info["team_reward"][0] < 0
+    assert not info["battle_won"] and not info["episode_limit"]
+    assert info["dead_allies"] == 2 and not info["alive"][:2].any()
+    assert env.arena_info["winner"] == "red"
+    assert info["t"] < 3000 and reward == env.arena_info["team_reward"][0] < 0
+    np.testing.assert_array_equal(info["hp_fraction"][:2], [0.0, 0.0])
     # A destroyed robot may only no-op.
     np.testing.assert_array_equal(info["action_mask"][:, 0], [1, 1])
     assert not info["action_mask"][:, 1:].any()
 
 
+def test_infos_are_numeric_with_the_same_keys_after_reset_and_step(
+    make: Callable[..., CoopEnv],
+) -> None:
+    env = make("abstract", zones=True)
+    _, first = env.reset(seed=2)
+    assert set(first) == {*SCALAR_KEYS, *ROBOT_KEYS, "action_mask"} and numeric(first)
+    assert first["t"] == 0 and not first["battle_won"] and first["alive"].all()
+    np.testing.assert_array_equal(first["hp_fraction"], np.ones(4, np.float32))
+    np.testing.assert_array_equal(first["bullets_fraction"], np.ones(4, np.float32))
+    steps = run_episode(env, seed=2)
+    for *_, info in steps:
+        assert info.keys() == first.keys() and numeric(info)
+        for key in first:
+            assert np.shape(info[key]) == np.shape(first[key])
+            assert np.asarray(info[key]).dtype == np.asarray(first[key]).dtype, key
+    # What the numeric info leaves out stays in arena_info (zones: a dict and a log).
+    assert {"winner", "components", "zones", "zone_log"} <= env.arena_info.keys()
+    raw, info = env.arena_info, steps[-1][4]
+    assert info["reward_damage"] + info["reward_kill"] + info["reward_win"] == pytest.approx(
+        steps[-1][1]
+    )
+    np.testing.assert_array_equal(info["kills"], raw["kills"])
+    np.testing.assert_allclose(info["hp_fraction"][:2], np.asarray(raw["hp"][:2]) / 600, atol=1e-6)
+    env.reset(seed=2)
+    assert env.arena_info == {}
+
+
 def test_contexts_merge_and_reach_the_arena(make: Callable[..., CoopEnv]) -> None:
     env = make("discrete", contexts={"coef": 10.0})
     env.reset(seed=0, options={"contexts": {"opponent_hp": 1.0}})
-    *_, info = env.step(np.zeros(2, dtype=np.int64))
-    assert max(info["hp"][2:]) <= 1.0  # per-episode key applied ...
+    env.step(np.zeros(2, dtype=np.int64))
+    assert max(env.arena_info["hp"][2:]) <= 1.0  # per-episode key applied ...
     assert env.contexts == {"coef": 10.0}  # ... without replacing the constructor's
     with pytest.raises(InvalidContextError):
         env.reset(options={"contexts": {"no_such_key": 1}})
 
 
-# ---- construction, rendering, registration --------------------------------------------------
+# ---- seeding and the spec -------------------------------------------------------------------
+
+
+def test_first_unseeded_reset_draws_entropy_unless_a_seed_was_given() -> None:
+    def first_obs(**kwargs: Any) -> np.ndarray:
+        env = CoopEnv(env=IN_PROCESS, **SHORT, **kwargs)
+        try:
+            return env.reset()[0]
+        finally:
+            env.close()
+
+    assert not np.array_equal(first_obs(), first_obs())  # Gymnasium's entropy seeding
+    assert np.array_equal(first_obs(seed=3), first_obs(seed=3))  # the constructor's seed wins
+    np.testing.assert_array_equal(first_obs(seed=3), np.stack(Arena(seed=3, **SHORT).reset()))
+    # An arena the caller built keeps its own seed.
+    a, b = CoopEnv(env=Arena(seed=4, **SHORT)), CoopEnv(env=Arena(seed=4, **SHORT))
+    try:
+        assert np.array_equal(a.reset()[0], b.reset()[0])
+    finally:
+        a.close()
+        b.close()
+
+
+def test_make_fills_max_episode_steps_from_the_arena() -> None:
+    for options, limit in ((SHORT, 10), ({"action_space": "discrete"}, 200)):
+        env = gymnasium.make(ENV_ID, env=IN_PROCESS, **options)
+        try:
+            assert env.spec is not None and env.spec.max_episode_steps == limit
+            assert env.unwrapped.spec.max_episode_steps == limit  # type: ignore[union-attr]
+        finally:
+            env.close()
+    assert CoopEnv(env=IN_PROCESS).spec is None  # built directly, as Gymnasium's
+
+
+# ---- options, construction, rendering -------------------------------------------------------
+
+
+def test_client_knows_every_arena_option() -> None:
+    import dataclasses
+
+    assert {f.name for f in dataclasses.fields(ArenaConfig)} == source_module.ARENA_OPTIONS
+
+
+@pytest.mark.usefixtures("no_launch")
+def test_unknown_options_are_refused_before_anything_starts() -> None:
+    with pytest.raises(InvalidOptionError, match=r"max_cycles.*episode_steps"):
+        CoopEnv(max_cycles=25)
+    with pytest.raises(InvalidOptionError, match=r"\['colour'\].*valid options.*n_blue"):
+        gymnasium.make(ENV_ID, colour="red")
+    with pytest.raises(InvalidOptionError, match="port"):  # RM's arguments only when served
+        CoopEnv(env=IN_PROCESS, port=10000)
+    with pytest.raises(InvalidOptionError, match="module:attr"):
+        CoopEnv(env="neuronsmae.server.Arena")
+    with pytest.raises(InvalidOptionError, match="importable"):
+        CoopEnv(env="neuronsmae.server:NoSuchArena")
+    with pytest.raises(InvalidOptionError, match="render_mode"):
+        CoopEnv(render_mode="ascii")
 
 
 def test_wraps_an_instance_and_owns_it() -> None:
@@ -196,10 +326,41 @@ def test_refuses_other_modes_and_misplaced_options() -> None:
     arena.close()
     with pytest.raises(InvalidOptionError, match="no robot"):
         CoopEnv(env=lambda: Arena(seed=1, mode="bots"))
-    with pytest.raises(TypeError, match="n_blue"):
+    with pytest.raises(InvalidOptionError, match="n_blue"):
         CoopEnv(env=arena_factory("abstract"), n_blue=3)
-    with pytest.raises(ValueError, match="render_mode"):
-        CoopEnv(env=arena_factory("abstract"), render_mode="human")
+    with pytest.raises(InvalidOptionError, match="seed"):
+        CoopEnv(env=arena_factory("abstract"), seed=3)
+
+
+@pytest.mark.usefixtures("no_launch")
+def test_human_rendering_says_clearly_when_there_is_no_display(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    with pytest.raises(InvalidOptionError, match=r"no display.*rgb_array"):
+        gymnasium.make(ENV_ID, render_mode="human")
+    # The metadata then offers what works here, so check_env does not ask for a window.
+    env = CoopEnv(env=IN_PROCESS, **SHORT)
+    try:
+        assert env.metadata["render_modes"] == ["rgb_array"]
+        assert "human" in CoopEnv.metadata["render_modes"]  # make passes "human" through
+    finally:
+        env.close()
+
+
+@pytest.mark.skipif(display_problem() is not None, reason="needs a display (e.g. xvfb-run)")
+def test_human_rendering_opens_a_window_where_there_is_a_display() -> None:
+    env = gymnasium.make(ENV_ID, env=IN_PROCESS, render_mode="human", **SHORT)
+    try:
+        env.reset(seed=0)
+        window = env.unwrapped._renderer.window  # type: ignore[attr-defined]
+        assert window.is_open and env.render() is None
+        env.step(env.action_space.sample())
+    finally:
+        env.close()
+    assert not window.is_open
 
 
 def test_client_faces_do_not_import_the_server() -> None:
@@ -215,12 +376,18 @@ def test_client_faces_do_not_import_the_server() -> None:
 
 
 def test_module_qualified_id_registers_on_make() -> None:
-    env = gymnasium.make(f"neuronsmae.client:{ENV_ID}", env=arena_factory("discrete"))
-    try:
-        obs, _ = env.reset(seed=0)
-        assert env.observation_space.contains(obs)
-    finally:
-        env.close()
+    code = (
+        "import gymnasium\n"
+        f"env = gymnasium.make('neuronsmae.client:{ENV_ID}', env={IN_PROCESS!r})\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "assert env.observation_space.contains(obs)\n"
+        "env.close()\n"
+        "print('ok')\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert out.stdout.strip() == "ok"
 
 
 # ---- over the remote client -----------------------------------------------------------------
@@ -243,20 +410,21 @@ def test_check_env_over_rm_matches_in_process(start_server: Callable[..., Server
             warnings.filterwarnings("ignore", message=".*not having a spec")
             check_env(remote)
         assert same(run_episode(remote, seed=11), run_episode(local, seed=11))
+        # Unseeded episodes go on from the constructor's seed, on both sides alike.
+        assert same(run_episode(remote, seed=None), run_episode(local, seed=None))
     finally:
         remote.close()
         local.close()
 
 
 @pytest.mark.slow
-def test_registered_entry_point_launches_a_server() -> None:
-    # The default entry point: no env, so an RM that launches (and then stops) its own server.
-    env = gymnasium.make(ENV_ID, seed=3, port=free_port(), timeout=RM_TIMEOUT, **SHORT)
+def test_an_explicit_port_launches_a_server_there() -> None:
+    port = free_port()
+    env = gymnasium.make(ENV_ID, seed=3, port=port, timeout=RM_TIMEOUT, **SHORT)
     try:
-        assert isinstance(env.unwrapped.arena, RM)  # type: ignore[attr-defined]
-        obs, _ = env.reset(seed=0)
-        assert env.observation_space.contains(obs)
-        steps = run_episode(env.unwrapped, seed=0)  # type: ignore[arg-type]
+        arena = env.unwrapped.arena  # type: ignore[attr-defined]
+        assert isinstance(arena, RM) and arena.port == port
+        steps = run_episode(env.unwrapped, seed=0)
         assert steps[-1][3] and not steps[-1][2]
     finally:
         env.close()
