@@ -10,6 +10,9 @@ extra and are skipped without it.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Iterator
+
 import pytest
 
 SLOW_FIXTURES = frozenset({"start_server", "spawn", "routed", "local_ray", "loopback_ray"})
@@ -24,3 +27,15 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         marked = any(item.get_closest_marker(m) is not None for m in SLOW_MARKS)
         if fixtures & SLOW_FIXTURES or marked:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(scope="module")
+def local_ray() -> Iterator[None]:
+    """A local Ray of 2 CPUs for one test module (``pytest.mark.usefixtures("local_ray")``)."""
+    import ray  # the train extra: imported only by the modules that use it
+
+    ray.init(
+        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+    )
+    yield
+    ray.shutdown()

@@ -3,33 +3,21 @@
 from __future__ import annotations
 
 import json
-import logging
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import ray
 
 from bench.paper_table import main
 from neuronsmae.trainers.config import make_config, preset
 from neuronsmae.trainers.train import train
 
-pytestmark = [pytest.mark.ray, pytest.mark.slow]
+pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 
 TINY = [
     "episodes=40", "agent_hidden=16", "mixer_embed=8", "hypernet_hidden=8", "batch_size=4",
     "learning_starts=4", "eval_every=20", "eval_episodes=2", "final_eval_episodes=3",
     "envs_per_worker=5", "checkpoint_every=20",
 ]  # fmt: skip
-
-
-@pytest.fixture(scope="module", autouse=True)
-def local_ray() -> Iterator[None]:
-    ray.init(
-        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-    )
-    yield
-    ray.shutdown()
 
 
 def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(

@@ -13,6 +13,17 @@ from ray._private import ray_constants
 from neuronsmae.trainers.buffer import Episode
 
 N_AGENTS, OBS, STATE, ACTIONS, LIMIT = 2, 5, 4, 3, 6
+TINY_LEARNER = {
+    "progress": False,
+    "agent_hidden": 16,
+    "mixer_embed": 8,
+    "hypernet_hidden": 8,
+    "batch_size": 4,
+    "learning_starts": 4,
+    "eval_every": 0,
+    "final_eval_episodes": 2,
+}
+"""A learner and evaluation small enough for runs of many workers on 2 cores."""
 
 
 def make_episode(

@@ -24,6 +24,7 @@ from ray.cluster_utils import Cluster
 
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.train import Trainer
+from tests.trainers.conftest import TINY_LEARNER
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
@@ -90,14 +91,7 @@ def test_24_workers_spread_over_four_nodes_with_their_servers_beside_them(
             "worker_cpus": 0.5,
             "worker_resources": "sampler=1",
             "out": str(tmp_path),
-            "progress": False,
-            "agent_hidden": 16,
-            "mixer_embed": 8,
-            "hypernet_hidden": 8,
-            "batch_size": 4,
-            "learning_starts": 4,
-            "eval_every": 0,
-            "final_eval_episodes": 2,
+            **TINY_LEARNER,
         }
     )
     trainer = Trainer(cfg, hook=hook)

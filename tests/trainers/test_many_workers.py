@@ -14,6 +14,7 @@ import pytest
 
 from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.train import Trainer, local_cpus
+from tests.trainers.conftest import TINY_LEARNER
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
@@ -30,14 +31,7 @@ def test_many_workers_are_all_placed_and_every_episode_is_stored(
             "env": "inprocess",
             "envs_per_worker": 1,
             "out": str(tmp_path),
-            "progress": False,
-            "agent_hidden": 16,
-            "mixer_embed": 8,
-            "hypernet_hidden": 8,
-            "batch_size": 4,
-            "learning_starts": 4,
-            "eval_every": 0,
-            "final_eval_episodes": 2,
+            **TINY_LEARNER,
         }
     )
     assert local_cpus(cfg) >= workers * 0.5

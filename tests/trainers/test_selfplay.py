@@ -8,19 +8,16 @@ two episodes), so the pool at each episode is a function of the episode alone.
 from __future__ import annotations
 
 import csv
-import logging
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import ray
 import torch
 
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.pool import OpponentPool, SelfPlayConfig
 from tests.trainers.checkpoints import make_checkpoint
 
-pytestmark = [pytest.mark.ray, pytest.mark.slow]
+pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 
 TINY = [
     "workers=1", "env=inprocess", "sync=true", "iteration_episodes=2", "envs_per_worker=2",
@@ -28,15 +25,6 @@ TINY = [
     "learning_starts=2", "eval_every=0", "keep_best=false", "final_eval_episodes=2",
     "max_minutes=0", "checkpoint_every=4", "snapshot_every=4", "worker_cpus=0.5",
 ]  # fmt: skip
-
-
-@pytest.fixture(scope="module", autouse=True)
-def local_ray() -> Iterator[None]:
-    ray.init(
-        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-    )
-    yield
-    ray.shutdown()
 
 
 def _train(out: Path, episodes: int, *extra: str, resume: bool = False, code: int = 0) -> None:

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
-import logging
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +26,7 @@ from neuronsmae.trainers.rollout import Request
 from neuronsmae.trainers.sampler import PlacementError
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
 
-pytestmark = [pytest.mark.ray, pytest.mark.slow]
+pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 
 TINY = [
     "eval_episodes=2",
@@ -42,15 +40,6 @@ TINY = [
     "train_every=1",
     "envs_per_worker=2",  # chunks of two episodes: evaluations fall due between them
 ]
-
-
-@pytest.fixture(scope="module", autouse=True)
-def local_ray() -> Iterator[None]:
-    ray.init(
-        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-    )
-    yield
-    ray.shutdown()
 
 
 def _sets(*extra: str) -> list[str]:

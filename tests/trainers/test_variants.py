@@ -12,13 +12,10 @@ from __future__ import annotations
 
 import csv
 import json
-import logging
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-import ray
 import torch
 
 from neuronsmae.protocol import EnvInfo
@@ -28,7 +25,7 @@ from neuronsmae.trainers.config import make_config
 from neuronsmae.trainers.task import blue_view
 from neuronsmae.trainers.train import train
 
-pytestmark = [pytest.mark.ray, pytest.mark.slow]
+pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 
 TINY = {
     "workers": 1, "env": "inprocess", "episodes": 4, "envs_per_worker": 2, "agent_hidden": 16,
@@ -54,15 +51,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
         "arena.action_space": "discrete", "arena.observability": "partial",
     },
 }  # fmt: skip
-
-
-@pytest.fixture(scope="module", autouse=True)
-def local_ray() -> Iterator[None]:
-    ray.init(
-        num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-    )
-    yield
-    ray.shutdown()
 
 
 @pytest.mark.parametrize("name", list(VARIANTS))
