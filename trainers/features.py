@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -46,8 +47,9 @@ def raw(obs: np.ndarray) -> np.ndarray:
     return np.asarray(obs, np.float32)
 
 
-def _angle(angle: np.ndarray) -> list[np.ndarray]:
-    return [np.cos(angle), np.sin(angle)]
+def _angle(angle: np.ndarray) -> np.ndarray:
+    """``(cos, sin)`` of ``angle``, stacked first: ``[2, ...]``."""
+    return np.stack([np.cos(angle), np.sin(angle)])
 
 
 @dataclass(frozen=True)
@@ -102,36 +104,61 @@ class Relative:
         start = self.enemy_columns(j).stop + self.per_point * q
         return range(start, start + self.per_point)
 
+    @cached_property
+    def _columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Observation columns of the team's (x, y) ``[T, 2]``, the enemies' (x, y, yaw)
+        ``[E, 3]`` and their candidate points' (x, y) ``[E, k, 2]``."""
+        layout = self.info.obs
+        team = [layout.pose(r)[:2] for r in range(layout.team_size)]
+        enemies = [layout.pose(layout.enemy(j)) for j in range(layout.n_enemies)]
+        points = [[layout.point(j, q) for q in range(layout.k)] for j in range(layout.n_enemies)]
+        return np.array(team), np.array(enemies), np.array(points).reshape(len(enemies), -1, 2)
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """``obs [..., obs_shape]`` → ``[..., width]``."""
+        """``obs [..., obs_shape]`` → ``[..., width]``, every enemy and point at once."""
         layout = self.info.obs
         if obs.shape[-1] != layout.size:
             raise UnknownFeaturesError(
                 f"'relative' features expect {layout.size} values, got {obs.shape[-1]}"
             )
-        team = [_xy(obs, layout.pose(r)[:2]) for r in range(layout.team_size)]
-        me, my_yaw = team[0], obs[..., layout.pose(0)[2]] * np.pi
-        out = [obs]
-        for j in range(layout.n_enemies):
-            x, y, yaw = layout.pose(layout.enemy(j))
-            enemy, enemy_yaw = _xy(obs, (x, y)), obs[..., yaw] * np.pi
-            out += [np.linalg.norm(enemy - mate, axis=-1) / SCALE for mate in team]
-            to_enemy, from_enemy = enemy - me, me - enemy
-            out += _angle(np.arctan2(to_enemy[..., 1], to_enemy[..., 0]) - my_yaw)
-            out += _angle(np.arctan2(from_enemy[..., 1], from_enemy[..., 0]) - enemy_yaw)
-            for q in range(layout.k):
-                point = _xy(obs, layout.point(j, q))
-                out += [np.linalg.norm(point - mate, axis=-1) / SCALE for mate in team]
-                side = point - enemy
-                out += _angle(np.arctan2(side[..., 1], side[..., 0]) - enemy_yaw)
-        cols = [c if c.ndim == obs.ndim else c[..., None] for c in out]
-        return np.concatenate(cols, axis=-1).astype(np.float32)
+        team_cols, enemy_cols, point_cols = self._columns
+        team = _xy(obs, team_cols)  # [..., T, 2]
+        me, my_yaw = team[..., :1, :], obs[..., None, layout.pose(0)[2]] * np.pi  # [..., 1(, 2)]
+        enemy = _xy(obs, enemy_cols[:, :2])  # [..., E, 2]
+        enemy_yaw = obs[..., enemy_cols[:, 2]] * np.pi  # [..., E]
+        points = _xy(obs, point_cols)  # [..., E, k, 2]
+        to_enemy, from_enemy = enemy - me, me - enemy
+        side = points - enemy[..., None, :]
+        blocks = [
+            _distance(enemy[..., None, :], team[..., None, :, :]),  # [..., E, T]
+            *_angle(_bearing(to_enemy) - my_yaw)[..., :, None],  # 2 × [..., E, 1]
+            *_angle(_bearing(from_enemy) - enemy_yaw)[..., :, None],
+        ]
+        per_point = [
+            _distance(points[..., None, :], team[..., None, None, :, :]),  # [..., E, k, T]
+            *_angle(_bearing(side) - enemy_yaw[..., None])[..., None],  # 2 × [..., E, k, 1]
+        ]
+        shape = (*obs.shape[:-1], layout.n_enemies, -1)
+        blocks.append(np.concatenate(per_point, axis=-1).reshape(shape))
+        enemies = np.concatenate(blocks, axis=-1).reshape(*obs.shape[:-1], -1)
+        return np.concatenate([obs, enemies], axis=-1).astype(np.float32)
 
 
-def _xy(obs: np.ndarray, cols: tuple[int, ...]) -> np.ndarray:
-    """Metres from the normalised ``(x, y)`` at columns ``cols``: ``[..., 2]``."""
-    (hx, hy), (i, j) = FIELD_HALF, cols
-    return np.stack([obs[..., i] * hx + hx, obs[..., j] * hy + hy], -1)
+def _xy(obs: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Metres from the normalised ``(x, y)`` at columns ``cols [..., 2]``: the observation's
+    leading axes, then ``cols``'s."""
+    hx, hy = FIELD_HALF
+    return np.stack([obs[..., cols[..., 0]] * hx + hx, obs[..., cols[..., 1]] * hy + hy], -1)
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Euclidean distance over the last axis (of size 2), divided by :data:`SCALE`."""
+    return np.linalg.norm(a - b, axis=-1) / SCALE
+
+
+def _bearing(v: np.ndarray) -> np.ndarray:
+    """The direction of ``v [..., 2]``, in radians."""
+    return np.arctan2(v[..., 1], v[..., 0])
 
 
 def get_features(name: str, info: EnvInfo) -> Featurizer:
