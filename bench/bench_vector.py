@@ -1,6 +1,6 @@
 """The served vector path against the in-process one: CPU and speed per decision, memory.
 
-    python -m bench.bench_vector [--envs 1 4 8 16] [--steps 60] [--rounds 5]
+    python -m bench.bench_vector [--envs 1 4 8 16] [--steps 40] [--rounds 21]
 
 For each K, K arenas served by one ``neuronsmae-server --arenas K`` (reached through a
 ``VecRM``, unpaced) and K arenas in this process (a ``VecArena``) play the same loop: read
@@ -10,8 +10,11 @@ so load from other processes hits them alike. Reported per K, as medians over ro
 
 * CPU µs per decision (one decision = one arena advancing once): for the served path the
   client process and the server process together, all their threads; the ratio
-  in-process / served of those (**target ≥ 0.9 at K = 8**), and the paired ratio of
-  decisions per second;
+  in-process / served of those (**target ≥ 0.9 at K = 8**), and the ratio of decisions per
+  second. Both ratios are medians of per-round ratios: a round plays the in-process and
+  the served arenas back to back from the same state with the same actions (the same
+  simulation work), so a shared VM's slow drifts cancel within each pair; the interquartile
+  range of the per-round CPU ratios shows how noisy the machine was;
 * CPU by thread (client main / other, server main / other);
 * resident memory of the server per arena, idle after the first reset and after playing
   (**target ≤ 60 MB per arena at K = 8**).
@@ -102,6 +105,8 @@ def _row(k: int, runs: dict[str, list[Any]], idle_mb: float, played_mb: float) -
     local, served = runs["in_process"], runs["served"]
     cpu_in = statistics.median(c for _, c, _ in local)
     cpu_served = statistics.median(c for _, c, _ in served)
+    cpu_pairs = [p[1] / s[1] for p, s in zip(local, served, strict=True)]
+    q1, _, q3 = statistics.quantiles(cpu_pairs, n=4) if len(cpu_pairs) > 1 else [cpu_pairs[0]] * 3
     threads = np.median([t for _, _, t in served], axis=0)  # µs per decision
     per = {
         f"{who}_{part}": round(float(threads[i, j]), 1)
@@ -117,7 +122,8 @@ def _row(k: int, runs: dict[str, list[Any]], idle_mb: float, played_mb: float) -
         ),
         "in_process_cpu_us": round(cpu_in, 1),
         "served_cpu_us": round(cpu_served, 1),
-        "cpu_ratio": round(cpu_in / cpu_served, 3),
+        "cpu_ratio": round(statistics.median(cpu_pairs), 3),
+        "cpu_ratio_iqr": [round(q1, 3), round(q3, 3)],
         "served_cpu_us_by_thread": per,
         "server_rss_mb_per_arena_idle": round(idle_mb / k, 1),
         "server_rss_mb_per_arena_played": round(played_mb / k, 1),
@@ -127,8 +133,8 @@ def _row(k: int, runs: dict[str, list[Any]], idle_mb: float, played_mb: float) -
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--envs", type=int, nargs="+", default=[1, 4, 8, 16])
-    parser.add_argument("--steps", type=int, default=60, help="vector steps per round at K=8")
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--steps", type=int, default=40, help="vector steps per round at K=8")
+    parser.add_argument("--rounds", type=int, default=21)
     parser.add_argument("--pingpong-decisions", type=int, default=150)
     args = parser.parse_args()
     rows = run(args.envs, args.steps, args.rounds)
@@ -149,6 +155,7 @@ def main() -> None:
                 "in_process_cpu_us",
                 "served_cpu_us",
                 "cpu_ratio",
+                "cpu_ratio_iqr",
                 "server_rss_mb_per_arena_idle",
                 "server_rss_mb_per_arena_played",
             ],
