@@ -19,13 +19,16 @@ minutes, the test win rate (and draws, losses, return) at each evaluation contex
 directory, the commit and the machine. ``--env`` picks in-process arenas (the default here:
 the same episodes as served arenas, without a server process competing for the 2 cores) or
 served ones. ``--set KEY=VALUE`` overrides any config key (tests use it for tiny runs).
-Prints the table so far at the end.
+Prints the table so far at the end (``--report``: only that, as Markdown for
+docs/results.md: mean ± 95 % Student-t interval over seeds, each seed's figure, and the
+compute the recorded runs took).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import shutil
@@ -33,8 +36,11 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from scipy import stats
 
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
@@ -149,22 +155,62 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
     return record(args, alg, level, seed, train(cfg, resume=resume))
 
 
-def summary(table: dict[str, Any], learner: str) -> str:
-    """The table so far: mean win rate (coef 1.0) over seeds, the seeds, and the paper's."""
-    lines = [f"{'level':7} {'alg':5} {'paper':>6} {'mean':>6}  seeds (win rate at coef 1.0)"]
+def interval(rates: Sequence[float]) -> tuple[float, float | None]:
+    """The mean of ``rates`` and the half-width of its 95 % Student-t interval over the
+    seeds (None for fewer than two)."""
+    mean = statistics.fmean(rates)
+    if len(rates) < 2:
+        return mean, None
+    sem = statistics.stdev(rates) / math.sqrt(len(rates))
+    return mean, float(stats.t.ppf(0.975, len(rates) - 1)) * sem
+
+
+def cell(runs: Sequence[dict[str, Any]], test: str, seeds: int) -> str:
+    """One table cell: mean ± 95 % interval over seeds, then each seed's win rate; ``—`` with
+    no run, and the count of seeds when some are missing."""
+    runs = [r for r in runs if test in r["test"]]
+    if not runs:
+        return "—"
+    rates = [r["test"][test]["win_rate"] for r in runs]
+    mean, half = interval(rates)
+    head = f"{mean:.3f}" if half is None else f"{mean:.3f} ± {half:.3f}"
+    each = ", ".join(f"s{r['seed']} {r['test'][test]['win_rate']:.3f}" for r in runs)
+    missing = f"; {len(runs)} of {seeds} seeds" if len(runs) < seeds else ""
+    return f"{head} ({each}{missing})"
+
+
+def _runs(records: list[dict[str, Any]], alg: str, level: str, learner: str) -> list[dict]:
+    """The records of one cell and learner, by seed."""
+    mine = [r for r in records if (r["alg"], r["level"], r["learner"]) == (alg, level, learner)]
+    return sorted(mine, key=lambda r: r["seed"])
+
+
+def report(table: dict[str, Any], seeds: int = 3) -> str:
+    """The table as Markdown: the paper's figure, the paper preset's test win rate at coef
+    1.0 (the paper's reported setting) and at 1.5, and the project's learner at coef 1.0;
+    then what is recorded and the compute it took."""
+    records = table["records"]
+    lines = [
+        "| level | alg | paper | `--preset paper`, coef 1.0 | `--preset paper`, coef 1.5 "
+        "| project's learner, coef 1.0 |",
+        "|---|---|---|---|---|---|",
+    ]
     for level in LEVELS:
         for alg in ALGS:
-            runs = [
-                r
-                for r in table["records"]
-                if r["alg"] == alg and r["level"] == level and r["learner"] == learner
-            ]
-            if not runs:
-                continue
-            rates = [r["test"]["main"]["win_rate"] for r in runs]
-            seeds = ", ".join(f"s{r['seed']}: {r['test']['main']['win_rate']:.3f}" for r in runs)
-            mean = statistics.mean(rates)
-            lines.append(f"{level:7} {alg:5} {PAPER[level][alg]:6.2f} {mean:6.3f}  {seeds}")
+            paper, ours = (_runs(records, alg, level, who) for who in ("paper", "defaults"))
+            lines.append(
+                f"| {level} | {alg.upper()} | {PAPER[level][alg]:.2f} | "
+                f"{cell(paper, 'main', seeds)} | {cell(paper, 'coef=1.5', seeds)} | "
+                f"{cell(ours, 'main', seeds)} |"
+            )
+    done = [r for r in records if r["learner"] == "paper"]
+    hours = sum(r["wall_minutes"] for r in done) / 60
+    lines.append("")
+    lines.append(
+        f"Paper preset: {len(done)} of {len(ALGS) * len(LEVELS) * seeds} runs recorded, "
+        f"{sum(r['episodes'] for r in done):,} training episodes, {hours:.1f} h of wall "
+        "time (training and tests)."
+    )
     return "\n".join(lines)
 
 
@@ -182,7 +228,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="config override"
     )
+    p.add_argument("--report", action="store_true", help="print the table of --out and stop")
     args = p.parse_args(argv)
+    if args.report:
+        print(report(load(args.out), len(args.seeds)))
+        return 0
     algs = args.algs or (list(ALGS) if args.learner == "paper" else ["vdn"])
     table = load(args.out)
     for seed in args.seeds:
@@ -197,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
                 table["records"].append(line)
                 save(args.out, table)
                 print(f"recorded {alg}/{level}/s{seed}: {line['test']}", flush=True)
-    print(summary(table, args.learner))
+    print(report(table, len(args.seeds)))
     return 0
 
 

@@ -1,0 +1,43 @@
+"""The paper table's report: mean and 95 % interval over seeds, missing cells and seeds."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+
+from bench.paper_table import interval, report
+
+
+def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper") -> dict:
+    test: dict[str, Any] = {"main": {"win_rate": rate}}
+    if learner == "paper":
+        test["coef=1.5"] = {"win_rate": rate / 2}
+    return {"alg": alg, "level": level, "seed": seed, "learner": learner, "test": test,
+            "episodes": 30_000, "wall_minutes": 30.0}  # fmt: skip
+
+
+def test_interval_is_the_student_t_half_width_over_seeds() -> None:
+    mean, half = interval([0.5, 0.6, 0.7])
+    assert mean == pytest.approx(0.6)
+    # t(0.975, 2) = 4.3027; the standard error of (0.5, 0.6, 0.7) is 0.1 / sqrt(3)
+    assert half == pytest.approx(4.3027 * 0.1 / math.sqrt(3), rel=1e-4)
+    assert interval([0.4]) == (0.4, None)
+
+
+def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> None:
+    records = [_record("vdn", "easy", s, r) for s, r in ((1, 0.5), (2, 0.6), (3, 0.7))]
+    records += [_record("iql", "hard", 2, 0.25), _record("vdn", "easy", 1, 0.9, "defaults")]
+    lines = report({"records": records}).splitlines()
+    rows = {tuple(c.strip() for c in line.split("|")[1:3]): line for line in lines[2:11]}
+    assert len(rows) == 9  # three levels × three algorithms, in the paper's order
+    vdn = rows[("easy", "VDN")].split("|")
+    assert vdn[3].strip() == "0.93"  # the paper's figure
+    assert vdn[4].strip().startswith("0.600 ± 0.248 (s1 0.500, s2 0.600, s3 0.700)")
+    assert vdn[5].strip().startswith("0.300 ± 0.124")  # at coef 1.5
+    assert vdn[6].strip() == "0.900 (s1 0.900; 1 of 3 seeds)"  # the project's learner
+    assert "0.250 (s2 0.250; 1 of 3 seeds)" in rows[("hard", "IQL")]
+    assert rows[("middle", "QMIX")].count("—") == 3
+    assert lines[-1].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
+    assert "2.0 h of wall time" in lines[-1]
