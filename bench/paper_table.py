@@ -16,12 +16,14 @@ its budget is per session), and a run already in ``--out`` is skipped, so the sa
 continues the table after any interruption. After each run one record is written to
 ``--out`` (atomically): alg, level, learner, seed, episodes, env steps, updates, wall
 minutes, the test win rate (and draws, losses, return) at each evaluation contexts, the run
-directory, the commit and the machine. ``--env`` picks in-process arenas (the default here:
-the same episodes as served arenas, without a server process competing for the 2 cores) or
-served ones. ``--set KEY=VALUE`` overrides any config key (tests use it for tiny runs).
-Prints the table so far at the end (``--report``: only that, as Markdown for
-docs/results.md: mean ± 95 % Student-t interval over seeds, each seed's figure, and the
-compute the recorded runs took).
+directory, the commit and the machine; the run's logs (config, train.csv, eval.csv) are
+copied to ``<out>_runs/`` so that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*``
+draws the learning curves whatever machine ran them. ``--env`` picks in-process arenas (the
+default here: the same episodes as served arenas, without a server process competing for
+the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key (tests use it
+for tiny runs). Prints the table so far at the end (``--report``: only that, as Markdown
+for docs/results.md: mean ± 95 % Student-t interval over seeds, each seed's figure, and
+the compute the recorded runs took).
 """
 
 from __future__ import annotations
@@ -44,16 +46,11 @@ from scipy import stats
 
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
+from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
 from neuronsmae.trainers.train import train
 
 ALGS = ("iql", "vdn", "qmix")
 LEVELS = ("easy", "middle", "hard")
-PAPER = {
-    "easy": {"iql": 0.75, "vdn": 0.93, "qmix": 0.89},
-    "middle": {"iql": 0.48, "vdn": 0.62, "qmix": 0.57},
-    "hard": {"iql": 0.23, "vdn": 0.41, "qmix": 0.34},
-}
-"""The paper's table: win rate against the bot, 2 v 2, abstract actions."""
 DEFAULTS_TESTS = {"eval.extra_test_contexts": "coef=1.5"}
 """The project's learner is tested at coef 1.5 too, beside the paper preset's runs."""
 
@@ -140,6 +137,20 @@ def record(
     }
 
 
+LOGS = ("config.json", "train.csv", "eval.csv")
+"""What is kept of each run beside the table: enough for ``neuronsmae-plot`` to draw its
+learning curve in a later session, on another machine (the checkpoints are not kept)."""
+
+
+def keep_logs(run_dir: Path, out: Path, learner: str) -> Path:
+    """Copy the run's logs to ``<out>_runs/<learner>/<run>/`` and return that directory."""
+    dest = out.with_name(f"{out.stem}_runs") / learner / run_dir.name
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in LOGS:
+        shutil.copy2(run_dir / name, dest / name)
+    return dest
+
+
 def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[str, Any]:
     run_dir = args.runs / args.learner / f"{alg}_{level}_s{seed}"
     cfg = cell_config(args, alg, level, seed, run_dir)
@@ -152,7 +163,9 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
         print(f"resuming {run_dir} at {done} episodes", flush=True)
     else:
         print(f"starting {run_dir}", flush=True)
-    return record(args, alg, level, seed, train(cfg, resume=resume))
+    line = record(args, alg, level, seed, train(cfg, resume=resume))
+    line["logs"] = str(keep_logs(run_dir, args.out, args.learner))
+    return line
 
 
 def interval(rates: Sequence[float]) -> tuple[float, float | None]:
