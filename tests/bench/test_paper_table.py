@@ -51,4 +51,4 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     assert sorted(p.name for p in logs.iterdir()) == ["config.json", "eval.csv", "train.csv"]
     assert main(args) == 0  # already recorded: skipped, nothing added
     assert len(json.loads(out.read_text())["records"]) == 1
-    assert "qmix" in capsys.readouterr().out  # the summary table
+    assert "| hard | QMIX | 0.34 | 0." in capsys.readouterr().out  # the table, the run in it
