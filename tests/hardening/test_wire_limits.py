@@ -93,15 +93,27 @@ BULKY = {
 }
 
 
+def _cpu(work: Callable[[], Any], repeats: int = 3) -> float:
+    """The least thread CPU time ``work`` took over ``repeats`` runs."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.thread_time()
+        work()
+        best = min(best, time.thread_time() - t0)
+    return best
+
+
 @pytest.mark.parametrize("case", BULKY, ids=list(BULKY))
-def test_worst_case_payloads_under_the_limit_decode_in_bounded_time(case: str) -> None:
-    """The most objects 1 MiB can describe still decode in well under a second (these are
-    then refused by the arena's own checks, as wrong actions)."""
+def test_worst_case_payloads_under_the_limit_cost_what_msgpack_itself_costs(case: str) -> None:
+    """The most objects 1 MiB can describe decode at a small multiple of what msgpack alone
+    takes for the same bytes (these are then refused by the arena's own checks, as wrong
+    actions): the bounds and checks add no work that grows faster than the payload. Measured
+    as a ratio in one thread, back to back, so a slow or loaded machine slows both sides."""
     payload = BULKY[case]
     assert len(payload) <= MAX_REQUEST_BYTES
-    t0 = time.thread_time()
-    decode_request(payload)
-    assert time.thread_time() - t0 < 2.0
+    ours = _cpu(lambda: decode_request(payload))
+    plain = _cpu(lambda: msgpack.unpackb(payload, strict_map_key=False))
+    assert ours <= 10.0 * plain + 0.01, (ours, plain)
 
 
 def test_every_length_the_decoder_may_allocate_is_capped() -> None:
