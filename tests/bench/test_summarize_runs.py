@@ -1,0 +1,61 @@
+"""bench.summarize_runs: a finished run directory's figures, as docs/data keeps them."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from bench.summarize_runs import main, summarize
+from neuronsmae.trainers.records import EVAL_COLUMNS, TRAIN_COLUMNS
+
+
+def _write(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns, restval="0")
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _run(tmp_path: Path, finished: bool = True) -> Path:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({"alg": "vdn", "level": "easy", "seed": 3,
+                                                 "arena": {"n_blue": 3}, "lr": 1e-3}))  # fmt: skip
+    evals = [{"episodes": 500, "env_steps": 2e4, "win_rate": 0.5, "eval_episodes": 50,
+              "split": "validation", "weights": "latest", "contexts": "main"}]  # fmt: skip
+    if finished:
+        for weights, rate in (("latest", 0.8), ("best", 0.75)):
+            evals.append({"episodes": 900, "env_steps": 40000, "win_rate": rate, "draw_rate": 0.0,
+                          "loss_rate": 1 - rate, "mean_return": 3.0, "eval_episodes": 200,
+                          "split": "test", "weights": weights, "contexts": "main"})  # fmt: skip
+        evals.append({**evals[-1], "weights": "latest", "contexts": "coef=1.5", "win_rate": 0.6})
+    _write(run / "eval.csv", EVAL_COLUMNS, evals)
+    _write(run / "train.csv", TRAIN_COLUMNS, [{"updates": 1700, "wall_seconds": 1800.5}])
+    return run
+
+
+def test_summary_keeps_settings_counters_tests_and_curve(tmp_path: Path) -> None:
+    s = summarize("var", _run(tmp_path))
+    assert (s["episodes"], s["env_steps"], s["updates"]) == (900, 40000, 1700)
+    assert s["test"]["latest"]["win_rate"] == 0.8 and s["test"]["best"]["win_rate"] == 0.75
+    assert s["test"]["latest coef=1.5"]["win_rate"] == 0.6
+    assert s["validation"] == [[500, 0.5]]
+    assert s["config"] == {"alg": "vdn", "level": "easy", "seed": 3, "arena": {"n_blue": 3}}
+
+
+def test_an_unfinished_run_is_refused_by_name(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no test rows"):
+        summarize("var", _run(tmp_path, finished=False))
+
+
+def test_main_writes_json_with_the_snapshot_commit(tmp_path: Path, monkeypatch, capsys) -> None:
+    monkeypatch.setenv("NEURONSMAE_COMMIT", "abc123")
+    out = tmp_path / "data" / "x.json"
+    assert main([f"var={_run(tmp_path)}", "--out", str(out), "--note", "a test"]) == 0
+    payload = json.loads(out.read_text())
+    assert payload["commit"] == "abc123" and payload["what"] == "a test"
+    assert payload["runs"][0]["name"] == "var"
+    assert "| var | 900 | 40000 | 0.800 | 0.750 |" in capsys.readouterr().out
