@@ -6,11 +6,19 @@ or through other fixtures) or by the ``ray`` mark; tests that launch processes o
 carry ``@pytest.mark.slow`` where they are written. Tests that run another framework on
 NeuronsMAE are marked ``interop`` (``-m interop`` runs just them); they need the ``interop``
 extra and are skipped without it.
+
+Torch runs every test's networks on one intra-op thread, as the trainer's learner and
+workers do (``TrainConfig.torch_threads``): the tests' networks are tiny, and two spinning
+OpenMP threads on a 2-core machine with anything else running make a 1-second test take a
+minute.
 """
 
 from __future__ import annotations
 
 import logging
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # read by torch when a test first imports it
 from collections.abc import Iterator
 
 import pytest

@@ -103,6 +103,7 @@ def _cpu(work: Callable[[], Any], repeats: int = 3) -> float:
     return best
 
 
+@pytest.mark.slow  # seconds by design: each payload is decoded 6 times at the size limit
 @pytest.mark.parametrize("case", BULKY, ids=list(BULKY))
 def test_worst_case_payloads_under_the_limit_cost_what_msgpack_itself_costs(case: str) -> None:
     """The most objects 1 MiB can describe decode at a small multiple of what msgpack alone

@@ -256,3 +256,16 @@ def test_the_paper_preset_keeps_the_papers_ratios_at_any_worker_count(workers: i
 def test_bad_contexts_and_levels_are_config_errors(layer: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         make_config(layer)
+
+
+@pytest.mark.parametrize("workers", [20, 25])
+@pytest.mark.parametrize("servers", ["local", "actors"])
+def test_a_local_ray_is_told_enough_cpus_for_every_worker_and_server(
+    workers: int, servers: str
+) -> None:
+    from neuronsmae.trainers.placement import SERVER_CPUS
+    from neuronsmae.trainers.train import local_cpus
+
+    cfg = make_config({"workers": workers, "env": "remote", "cluster": {"servers": servers}})
+    need = workers * cfg.cluster.worker_cpus + (workers * SERVER_CPUS if servers == "actors" else 0)
+    assert local_cpus(cfg) >= need + 1  # every worker and server actor placed, and the learner

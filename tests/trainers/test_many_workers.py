@@ -1,9 +1,11 @@
-"""20 and 25 rollout workers on a 2-core machine: the trainer's own Ray is sized for them.
+"""25 rollout workers on a 2-core machine: the trainer's own Ray is sized for them.
 
 The paper sampled with 20-25 workers. Here every worker asks for half a CPU, so a Ray that
 only counted this machine's 2 cores would place 4 of them and leave the rest pending; the
 trainer tells its local Ray it has enough CPUs for all (they share the real cores,
-oversubscribed), and every episode played is stored. Tiny runs: a few episodes each.
+oversubscribed), and every episode played is stored. Tiny runs: a few episodes each. The
+upper end of the paper's range is run (25: about 90 s of a 2-core machine's suite); 20 is
+placed by the same sizing, which tests/trainers/test_config.py checks without Ray.
 """
 
 from __future__ import annotations
@@ -19,10 +21,8 @@ from tests.trainers.conftest import TINY_LEARNER
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
 
-@pytest.mark.parametrize("workers", [20, 25])
-def test_many_workers_are_all_placed_and_every_episode_is_stored(
-    workers: int, tmp_path: Path
-) -> None:
+def test_many_workers_are_all_placed_and_every_episode_is_stored(tmp_path: Path) -> None:
+    workers = 25
     cfg = make_config(
         {
             "workers": workers,
