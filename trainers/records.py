@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 PERMILLE = 1000
@@ -140,6 +139,8 @@ class Recorder:
         self.train_csv = _Csv(run_dir / "train.csv", TRAIN_COLUMNS)
         self.eval_csv = _Csv(run_dir / "eval.csv", EVAL_COLUMNS)
         self.episodes_csv = _Csv(run_dir / "episodes.csv", EPISODE_COLUMNS)
+        from torch.utils.tensorboard import SummaryWriter  # 1-2 s to import: only for a run
+
         self.tb = SummaryWriter(str(run_dir / "tb"))
         self.total, self.first, self.episodes = total_episodes, done_episodes, done_episodes
         self.max_seconds = max_seconds
