@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import logging
 import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")  # read by torch when a test first imports it
 from collections.abc import Iterator
 
 import pytest
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # read by torch when a test first imports it
 
 SLOW_FIXTURES = frozenset({"start_server", "spawn", "routed", "local_ray", "loopback_ray"})
 """Fixtures that start server or router processes, or Ray."""
