@@ -1,7 +1,7 @@
 """Sampling throughput: the trainers' rollout workers against the bare arena, same run.
 
-    python -m bench.bench_sampling [--envs 1 8] [--workers 1 2] [--groups 1 2] [--seconds 10]
-                                   [--repeats 3]
+    python -m bench.bench_sampling [--envs 1 8] [--workers 1 2] [--groups 1 2] [--servers 1 2]
+                                   [--seconds 10] [--repeats 3]
 
 What a learner sees: env steps (decisions) per second of *finished episodes*, policy
 included: the ε-greedy GRU agent of the default architecture (untrained: acting costs the
@@ -14,10 +14,11 @@ episode packing that training uses. Rows:
   in this process (one batched forward per decision for all its arenas);
 * **Ray**: the trainers' ``Sampler`` with ``workers`` Ray actors of ``envs`` arenas each,
   ``inprocess`` (a ``VecArena`` in the worker) or ``remote`` (a ``VecRM`` of the worker's
-  own vector server, unpaced), two chunks in flight per worker, ``per_worker`` = total / n.
-  A served worker plays its arenas in ``groups`` stepped in turn (the server steps one group
-  while the worker chooses the other's actions; training uses 2): each of ``--groups`` is a
-  row of its own.
+  own vector server(s), unpaced), two chunks in flight per worker, ``per_worker`` = total /
+  n. A served worker's arenas are held by ``servers`` private servers stepped side by side
+  (``cluster.servers_per_worker``) and played in ``groups`` stepped in turn (the worker
+  chooses one group's actions while the other's step; ``cluster.groups``): each combination
+  of ``--servers`` and ``--groups`` is a row of its own.
 
 **Target: a worker delivers ≥ 0.75 of the bare rate with envs = 8** (the ``ratio`` column:
 per-worker rate / bare rate, medians of the paired rounds). Rounds alternate between every
@@ -116,40 +117,43 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--worker-cpus", type=float, default=0.5)
-    parser.add_argument("--groups", type=int, nargs="+", default=[2], help="served rows (2)")
+    parser.add_argument("--groups", type=int, nargs="+", default=[1], help="served rows (1)")
+    parser.add_argument("--servers", type=int, nargs="+", default=[1, 2], help="served rows")
     args = parser.parse_args()
 
     combos = [
-        (n, e, kind, g)
+        (n, e, kind, g, s)
         for n in args.workers
         for e in args.envs
         for kind in args.env
+        for s in (args.servers if kind == "remote" and e > 1 else [1])
         for g in (args.groups if kind == "remote" and e > 1 else [1])
     ]
     # Every sampler's actors live at once (rounds interleave), so Ray must be told there
     # are enough CPUs for all of them; they still share the machine's real cores.
-    cpus = math.ceil(sum(n for n, _, _, _ in combos) * args.worker_cpus) + 1
+    cpus = math.ceil(sum(n for n, *_ in combos) * args.worker_cpus) + 1
     ray.init(
         num_cpus=cpus, include_dashboard=False, logging_level=logging.WARNING, log_to_driver=False
     )
     arena = Arena(seed=1)
     local = {e: RolloutWorker(0, "inprocess", 1, None, envs=e) for e in args.envs}
     policy = make_policy(local[args.envs[0]].env_info())
-    samplers: dict[tuple[int, int, str, int], Sampler] = {}
+    samplers: dict[tuple[int, int, str, int, int], Sampler] = {}
     rounds: dict[str, list[float]] = {"bare": []}
     try:
-        for n, e, kind, g in combos:
+        for n, e, kind, g, s in combos:
             sampler = Sampler(
                 n,
                 env_kind=kind,
                 base_seed=1000,
                 envs_per_worker=e,
                 groups=g,
+                servers_per_worker=s,
                 worker_cpus=args.worker_cpus,
             )
             sampler.broadcast(policy)
             sampler.run([Request(k, EPSILON, CONTEXTS) for k in range(n * e)])  # warm up
-            samplers[(n, e, kind, g)] = sampler
+            samplers[(n, e, kind, g, s)] = sampler
         for worker in local.values():
             worker_round(worker, policy, 2.0, 0)
         bare_round(arena, 2.0, np.random.default_rng(0))
@@ -159,8 +163,8 @@ def main() -> None:
             for e, worker in local.items():
                 key = f"worker {e}"
                 rounds.setdefault(key, []).append(worker_round(worker, policy, args.seconds, seed))
-            for (n, e, kind, g), sampler in samplers.items():
-                key = f"ray {n} {e} {kind} {g}"
+            for (n, e, kind, g, s), sampler in samplers.items():
+                key = f"ray {n} {e} {kind} {g} {s}"
                 rounds.setdefault(key, []).append(ray_round(sampler, args.seconds, seed) / n)
     finally:
         for sampler in samplers.values():
@@ -173,7 +177,13 @@ def main() -> None:
     base = rounds["bare"]
 
     def row(
-        label: str, workers: int, envs: int | str, env: str, key: str, groups: int = 1
+        label: str,
+        workers: int,
+        envs: int | str,
+        env: str,
+        key: str,
+        groups: int = 1,
+        servers: int = 1,
     ) -> dict[str, Any]:
         rates = rounds[key]
         return {
@@ -182,14 +192,18 @@ def main() -> None:
             "envs": envs,
             "env": env,
             "groups": groups,
+            "servers": servers,
             "steps_per_s_per_worker": statistics.median(rates),
             "ratio": statistics.median([a / b for a, b in zip(rates, base, strict=True)]),
         }
 
     rows = [row("bare arena, random actions", 1, 1, "inprocess", "bare")]
     rows += [row("worker, no Ray", 1, e, "inprocess", f"worker {e}") for e in local]
-    rows += [row("Ray sampler", n, e, k, f"ray {n} {e} {k} {g}", g) for n, e, k, g in samplers]
-    columns = ["sampling", "workers", "envs", "env", "groups", "steps_per_s_per_worker", "ratio"]
+    rows += [
+        row("Ray sampler", n, e, k, f"ray {n} {e} {k} {g} {s}", g, s) for n, e, k, g, s in samplers
+    ]
+    columns = ["sampling", "workers", "envs", "env", "servers", "groups"]
+    columns += ["steps_per_s_per_worker", "ratio"]
     print(table(rows, columns))
     print(f"target: per-worker rate ≥ {TARGET} of the bare arena's with envs = {TARGET_ENVS}")
     report = {

@@ -12,9 +12,10 @@ all their results as stacked arrays, so that cost is paid once per K decisions.
 Several servers (``port=[p1, p2, ...]`` or ``servers=m`` private ones) hold consecutive
 shares of the arenas (as even as possible, the first servers taking the extra ones); a
 request goes to every server at once and the replies are gathered, so the servers step
-their shares in parallel. A request that one server would refuse (a bad action, context or
-seed) is refused here before anything is sent, so no arena moves: the checks use the
-layout of ``get_env_info`` and the servers' context table.
+their shares in parallel; a server none of whose arenas is ``active`` in a step is not
+asked (its reply is known: nothing moved). A request that one server would refuse (a bad
+action, context or seed) is refused here before anything is sent, so no arena moves: the
+checks use the layout of ``get_env_info`` and the servers' context table.
 """
 
 from __future__ import annotations
@@ -33,7 +34,13 @@ from neuronsmae.protocol.errors import (
     InvalidOptionError,
     ResetNeededError,
 )
-from neuronsmae.protocol.interface import StepHandle, VecArenaAPI, inherit_docstrings, per_arena
+from neuronsmae.protocol.interface import (
+    StepHandle,
+    VecArenaAPI,
+    inherit_docstrings,
+    per_arena,
+    shares_of,
+)
 from neuronsmae.protocol.launch import ServerCommand, check_launch, ports_of
 from neuronsmae.protocol.messages import (
     MAX_ARENAS,
@@ -48,13 +55,6 @@ from neuronsmae.protocol.messages import (
 
 STACKED = ("obs", "state", "avail_actions")
 """What every vector reply carries, stacked over the server's arenas."""
-
-
-def shares_of(num_envs: int, servers: int) -> list[int]:
-    """How many of ``num_envs`` arenas each of ``servers`` servers holds: as even as
-    possible, the first servers taking one more."""
-    base, extra = divmod(num_envs, servers)
-    return [base + (1 if j < extra else 0) for j in range(servers)]
 
 
 @inherit_docstrings
@@ -205,8 +205,10 @@ class VecRM(VecArenaAPI):
             self._check_contexts(ctx_list)
         flags = None if active is None else self._flags(active)
         n = len(self._conns)
-        calls = [
-            conn.send(
+        calls: list[Call | dict[str, Any]] = [
+            self._idle_reply(j)
+            if f is not None and n > 1 and not any(f)
+            else conn.send(
                 VStep(
                     actions=part,
                     seeds=None if seed_list is None else s,
@@ -215,15 +217,15 @@ class VecRM(VecArenaAPI):
                 ),
                 InvalidActionError,
             )
-            for conn, part, s, c, f in zip(
+            for j, (conn, part, s, c, f) in enumerate(zip(
                 self._conns,
                 self._split(rows),
                 self._split(seed_list) if seed_list is not None else [None] * n,
                 self._split(ctx_list) if ctx_list is not None else [None] * n,
                 self._split(flags) if flags is not None else [None] * n,
                 strict=True,
-            )
-        ]
+            ))
+        ]  # fmt: skip
         return _PendingStep(self, calls)
 
     def get_obs(self) -> np.ndarray:
@@ -247,11 +249,22 @@ class VecRM(VecArenaAPI):
 
     # ---- requests ------------------------------------------------------------------------
 
-    def _gather(self, calls: list[Call]) -> list[dict[str, Any]]:
+    def _gather(self, calls: Sequence[Call | dict[str, Any]]) -> list[dict[str, Any]]:
         """Wait for every server's reply and keep the stacked arrays they carry."""
-        values = [call.result().value for call in calls]
+        values = [c if isinstance(c, dict) else c.result().value for c in calls]
         self._cache = {k: np.concatenate([v[k] for v in values]) for k in STACKED}
         return values
+
+    def _idle_reply(self, j: int) -> dict[str, Any]:
+        """What server ``j`` would reply to a step in which none of its arenas is active:
+        its arenas as they are, no reward, not done, empty infos. Such a step is not sent,
+        so with one server per group of arenas (``RolloutWorker``'s groups) a group's step
+        reaches only its own server."""
+        lo, k = self.offsets[j], self.shares[j]
+        part = {name: self._cache[name][lo : lo + k].copy() for name in STACKED}
+        n = int(self._info["n_agents"])
+        return {**part, "rewards": np.zeros((k, n)), "dones": np.zeros(k, dtype=bool),
+                "infos": [{} for _ in range(k)]}  # fmt: skip
 
     def _obs_copy(self) -> np.ndarray:
         return self._cache["obs"].copy()
@@ -328,7 +341,7 @@ class VecRM(VecArenaAPI):
 class _PendingStep(StepHandle):
     """A ``vstep`` sent to every server; :meth:`result` gathers and stacks the replies."""
 
-    def __init__(self, vec: VecRM, calls: list[Call]) -> None:
+    def __init__(self, vec: VecRM, calls: list[Call | dict[str, Any]]) -> None:
         super().__init__(None)
         self._vec, self._calls = vec, calls
 

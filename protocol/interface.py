@@ -134,6 +134,14 @@ def per_arena(
     return list(values)
 
 
+def shares_of(num_envs: int, parts: int) -> list[int]:
+    """How many of ``num_envs`` consecutive arenas each of ``parts`` parts holds (a
+    ``VecRM``'s servers, a rollout worker's groups): as even as possible, the first parts
+    taking one more."""
+    base, extra = divmod(num_envs, parts)
+    return [base + (1 if j < extra else 0) for j in range(parts)]
+
+
 class StepHandle:
     """A ``step`` in progress (:meth:`VecArenaAPI.step_async`): :meth:`result` waits for it
     and returns what ``step`` returns."""

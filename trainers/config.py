@@ -167,11 +167,12 @@ class TrainConfig:
         check_positive(self, "episodes", "torch_threads", "envs_per_worker")
         if self.envs_per_worker > 64:
             raise ConfigError(f"envs_per_worker must be in [1, 64], got {self.envs_per_worker}")
-        if self.cluster.groups > self.envs_per_worker:
-            raise ConfigError(
-                f"cluster.groups must be in [1, envs_per_worker={self.envs_per_worker}], "
-                f"got {self.cluster.groups}"
-            )
+        for name in ("groups", "servers_per_worker"):
+            if getattr(self.cluster, name) > self.envs_per_worker:
+                raise ConfigError(
+                    f"cluster.{name} must be in [1, envs_per_worker={self.envs_per_worker}], "
+                    f"got {getattr(self.cluster, name)}"
+                )
         if self.workers < 0 or self.max_minutes < 0:
             raise ConfigError(
                 f"workers and max_minutes must be ≥ 0, got {self.workers} and {self.max_minutes}"

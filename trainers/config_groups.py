@@ -231,6 +231,14 @@ class ClusterConfig:
     oversubscribed machine the smaller requests cost more than the overlap saves (2 cores,
     load 7, 1 worker of 8 arenas: 0.450 of the bare arena's rate with 1 group, 0.367 with 2;
     ``python -m bench.bench_sampling --workers 1 --envs 8 --groups 1 2``)."""
+    servers_per_worker: int = 1
+    """env=remote with private servers (base_port 0, servers local): vector servers each
+    worker launches, in [1, envs_per_worker], holding consecutive shares of its arenas and
+    stepped side by side, so one worker's arenas can use several cores. 2 pays where a
+    worker has more than its own core (1 worker of 8 arenas on 2 cores: ``python -m
+    bench.bench_sampling --workers 1 --envs 8 --servers 1 2``, docs/benchmarks.md); where
+    every core is taken (the learner and two workers on 2 cores) one server per worker
+    costs the least CPU."""
     worker_resources: str = ""
     """Custom Ray resources each worker also requires, "name=amount[,...]" (e.g. "sampler=1"
     puts workers only on nodes started with --resources '{"sampler": N}', N per node)."""
@@ -250,7 +258,15 @@ class ClusterConfig:
         parse_resources(self.worker_resources)
         parse_resources(self.server_resources)
         check_positive(self, "max_worker_failures")
-        check_positive(self, "groups")
+        check_positive(self, "groups", "servers_per_worker")
+        if self.servers_per_worker > 1 and (
+            self.base_port or self.servers != "local" or self.router
+        ):
+            raise ConfigError(
+                "cluster.servers_per_worker > 1 needs private servers (cluster.base_port=0, "
+                f"cluster.servers=local, no cluster.router); got base_port={self.base_port}, "
+                f"servers={self.servers!r}, router={self.router!r}"
+            )
         if not 0 <= self.base_port < 65536:
             raise ConfigError(
                 f"base_port must be 0 (private servers) or a port, got {self.base_port}"

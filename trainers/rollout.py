@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from neuronsmae.protocol import EnvInfo, VecArenaAPI
-from neuronsmae.protocol.interface import StepHandle
+from neuronsmae.protocol.interface import StepHandle, shares_of
 from neuronsmae.trainers.agent import epsilon_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.learner import AgentSpec
@@ -52,9 +52,11 @@ def open_env(
     port: int | None,
     envs: int = 1,
     options: Mapping[str, Any] | None = None,
+    servers: int = 1,
 ) -> VecArenaAPI:
     """Open ``envs`` arenas seeded ``seed, seed + 1, ...``: an in-process ``VecArena`` or a
-    ``VecRM`` of a vector server (on ``port``; None launches a private one, unpaced).
+    ``VecRM`` of a vector server (on ``port``; None launches ``servers`` private ones,
+    unpaced, holding consecutive shares of the arenas).
 
     The server package is imported only for ``inprocess``, so a trainer that talks to remote
     servers needs only the client (trainers → client → protocol).
@@ -67,7 +69,8 @@ def open_env(
     if kind == "remote":
         from neuronsmae.client import VecRM
 
-        return VecRM(seed, port=port, num_envs=envs, **opts)
+        return VecRM(seed, port=port, num_envs=envs, servers=servers if port is None else 1,
+                     **opts)  # fmt: skip
     raise ValueError(f"unknown env kind {kind!r}; valid: inprocess, remote")
 
 
@@ -282,10 +285,13 @@ class _Slots:
 class RolloutWorker:
     """Owns ``envs`` arenas and the acting copy of the shared agent network.
 
-    ``groups`` (1 or 2) splits the arenas into groups stepped in turn: with a served vector,
-    two groups keep the server busy while the worker computes actions (the worker chooses
-    one group's actions while the server steps the other's arenas). In process there is
-    nothing to overlap, and one group (one forward pass for all arenas) is best.
+    ``servers`` (``env_kind`` remote, ``port`` None): private vector servers holding
+    consecutive shares of the arenas; every step goes to all of them at once, so they step
+    their shares side by side on the node's cores while the worker waits for the slowest.
+    ``groups`` splits the arenas into groups (the same shares) stepped in turn: the worker
+    chooses one group's actions while the other's arenas step; a step whose server holds
+    none of the group's arenas is not sent. In process there is nothing to overlap, and one
+    group (one forward pass for all arenas) is best.
     """
 
     def __init__(
@@ -297,10 +303,11 @@ class RolloutWorker:
         env_options: Mapping[str, Any] | None = None,
         envs: int = 1,
         groups: int = 1,
+        servers: int = 1,
     ) -> None:
         torch.set_num_threads(1)  # many workers share few cores; one thread each is fastest
         self.index = index
-        self.env = open_env(env_kind, env_seed, port, envs, env_options)
+        self.env = open_env(env_kind, env_seed, port, envs, env_options, servers)
         self.envs = envs
         self.groups = max(1, min(groups, envs))
         info = EnvInfo.from_dict(self.env.get_env_info())
@@ -371,7 +378,7 @@ class RolloutWorker:
             [None if f is None else f[1].seed for f in first],
         )
         now = _Arrays(raw, env.get_state(), env.get_avail_actions(), n, featurize)
-        bounds = np.linspace(0, k, self.groups + 1).astype(int)
+        bounds = np.cumsum([0, *shares_of(k, self.groups)])  # as the servers' shares
         groups = [_Slots(self, lo, hi) for lo, hi in itertools.pairwise(bounds)]
         for g in groups:
             g.start(first[g.lo : g.hi], now)

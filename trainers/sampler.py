@@ -96,6 +96,7 @@ class Sampler:
         worker_cpus: float,
         envs_per_worker: int = 1,
         groups: int = 1,
+        servers_per_worker: int = 1,
         base_port: int = 0,
         env_options: Mapping[str, Any] | None = None,
         max_failures: int = 5,
@@ -105,6 +106,7 @@ class Sampler:
         start_timeout: float = START_TIMEOUT,
     ) -> None:
         self.env_kind, self.envs, self.groups = env_kind, envs_per_worker, groups
+        self.servers_per_worker = servers_per_worker
         self.base_seed, self.base_port = base_seed, base_port
         self.env_options = dict(env_options or {})
         self.max_failures, self.pipeline = max_failures, pipeline
@@ -136,7 +138,14 @@ class Sampler:
             host, port = self.servers.endpoint(i)
             options = {**options, "host": host, "launch": False}
         return self.actor_cls.remote(
-            i, self.env_kind, self.base_seed + i * self.envs, port, options, self.envs, self.groups
+            i,
+            self.env_kind,
+            self.base_seed + i * self.envs,
+            port,
+            options,
+            self.envs,
+            self.groups,
+            self.servers_per_worker if port is None else 1,
         )
 
     def _await_placement(self, timeout: float) -> None:

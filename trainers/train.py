@@ -159,6 +159,7 @@ class Trainer:
             base_port=cfg.cluster.base_port,
             envs_per_worker=cfg.envs_per_worker,
             groups=cfg.cluster.groups if cfg.env == "remote" else 1,
+            servers_per_worker=cfg.cluster.servers_per_worker,
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
             env_options=cfg.arena.arena_options(self.mode),

@@ -106,6 +106,44 @@ def test_several_servers_play_as_one_vector_and_refuse_atomically(
             local.close()
 
 
+def test_a_server_with_no_active_arena_is_not_asked(
+    start_server: Callable[..., Server], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A step whose ``active`` arenas all live on one server goes to that server only, and
+    the vector still plays exactly like the in-process one (the other server's arenas stay
+    as they were: no reward, not done, empty infos)."""
+    a, b = start_server("--arenas", "2"), start_server("--arenas", "2")
+    with VecRM(seed=5, port=[a.port, b.port], num_envs=4, launch=False) as remote:
+        local = VecArena(seed=5, num_envs=4)
+        sent: list[int] = []
+        for conn in remote._conns:
+            original = conn.send
+            monkeypatch.setattr(
+                conn, "send", lambda body, *args, _o=original, _p=conn.port: (
+                    sent.append(_p), _o(body, *args))[1]
+            )  # fmt: skip
+        try:
+            remote.reset(seed=[1, 2, 3, 4])
+            local.reset(seed=[1, 2, 3, 4])
+            rng = np.random.default_rng(0)
+            for t in range(40):
+                first = t % 2 == 0  # the first server's arenas, then the second's
+                active = np.array([first, first, not first, not first])
+                avail = local.get_avail_actions()
+                actions = (avail * rng.random(avail.shape)).argmax(-1)
+                sent.clear()
+                got = remote.step(actions, active=active)
+                want = local.step(actions, active=active)
+                assert sent == [a.port if first else b.port]
+                assert got[0].tobytes() == want[0].tobytes()
+                assert got[1].tobytes() == want[1].tobytes()
+                assert got[2].tolist() == want[2].tolist() and got[3] == want[3]
+                assert remote.get_state().tobytes() == local.get_state().tobytes()
+                assert remote.get_avail_actions().tobytes() == local.get_avail_actions().tobytes()
+        finally:
+            local.close()
+
+
 def test_counts_must_match_the_server(start_server: Callable[..., Server]) -> None:
     server = start_server("--arenas", "4")
     with pytest.raises(InvalidOptionError, match=r"holds 4 arena\(s\).*asked for 2"):

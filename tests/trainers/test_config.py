@@ -30,7 +30,7 @@ def test_the_configuration_is_grouped_and_small() -> None:
     assert len(top) < 35 and set(GROUPS) <= set(top)
     sizes = {name: len(dataclasses.fields(cls)) for name, cls in GROUPS.items()}
     assert sizes == {
-        "learner": 22, "eval": 8, "cluster": 9, "arena": 9, "selfplay": 2, "experimental": 3
+        "learner": 22, "eval": 8, "cluster": 10, "arena": 9, "selfplay": 2, "experimental": 3
     }  # fmt: skip
     assert len(KEYS) == len(top) - len(GROUPS) + sum(sizes.values())
 
@@ -106,6 +106,13 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["servers=cloud"], "valid: local, actors"),
         (["cluster.groups=0"], "groups must be ≥ 1"),
         (["groups=3", "envs_per_worker=2"], r"cluster.groups must be in \[1, envs_per_worker=2\]"),
+        (["servers_per_worker=0"], "servers_per_worker must be ≥ 1"),
+        (
+            ["servers_per_worker=3", "envs_per_worker=2"],
+            r"cluster.servers_per_worker must be in \[1, envs_per_worker=2\]",
+        ),
+        (["servers_per_worker=2", "base_port=12000"], "needs private servers"),
+        (["servers_per_worker=2", "servers=actors"], "needs private servers"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:

@@ -125,15 +125,23 @@ def test_exploring_episodes_are_whole_and_keep_their_own_epsilon() -> None:
 
 
 @pytest.mark.slow
-def test_two_groups_on_a_served_vector_play_what_one_arena_plays(worker: RolloutWorker) -> None:
-    """A served vector of four arenas in two groups, stepped in turn while the worker chooses
-    the other group's actions: each greedy episode equals the in-process one-arena one."""
+@pytest.mark.parametrize(("groups", "servers"), [(2, 1), (1, 2), (2, 2)])
+def test_groups_and_servers_of_a_served_vector_play_what_one_arena_plays(
+    worker: RolloutWorker, groups: int, servers: int
+) -> None:
+    """Four served arenas, in one or two groups (stepped in turn while the worker chooses
+    the other group's actions), on one or two private servers: each greedy episode equals
+    the in-process one-arena one."""
     policy, _ = _policy(worker)
-    served = RolloutWorker(3, "remote", env_seed=70, port=None, envs=4, groups=2)
+    served = RolloutWorker(
+        3, "remote", env_seed=70, port=None, envs=4, groups=groups, servers=servers
+    )
+    assert len(served.env.ports) == servers  # type: ignore[attr-defined]
+    version = 100 + 10 * groups + servers  # a fresh policy: the fixture worker must load it
     try:
         requests = [Request(300 + k, 0.0, {"level": "hard"}) for k in range(6)]
-        for request, got in zip(requests, served.run(policy, 8, requests), strict=True):
-            want = worker.run_episode(policy, 8, 0.0, request.seed, request.contexts)
+        for request, got in zip(requests, served.run(policy, version, requests), strict=True):
+            want = worker.run_episode(policy, version, 0.0, request.seed, request.contexts)
             assert np.array_equal(got.actions, want.actions)
             assert np.array_equal(got.obs, want.obs) and np.array_equal(got.state, want.state)
             assert np.array_equal(got.rewards, want.rewards)
