@@ -235,10 +235,10 @@ class ClusterConfig:
     """env=remote with private servers (base_port 0, servers local): vector servers each
     worker launches, in [1, envs_per_worker], holding consecutive shares of its arenas and
     stepped side by side, so one worker's arenas can use several cores. 2 pays where a
-    worker has more than its own core (1 worker of 8 arenas on 2 cores: ``python -m
-    bench.bench_sampling --workers 1 --envs 8 --servers 1 2``, docs/benchmarks.md); where
-    every core is taken (the learner and two workers on 2 cores) one server per worker
-    costs the least CPU."""
+    worker has more than its own core (1 worker of 8 arenas on 2 cores: 0.807 of the bare
+    arena's rate with 2 servers, 0.606 with 1; ``python -m bench.bench_sampling --workers 1
+    --envs 8 --servers 1 2``); where every core is taken (the learner and two workers on 2
+    cores) one server per worker costs the least CPU."""
     worker_resources: str = ""
     """Custom Ray resources each worker also requires, "name=amount[,...]" (e.g. "sampler=1"
     puts workers only on nodes started with --resources '{"sampler": N}', N per node)."""
