@@ -17,8 +17,9 @@ continues the table after any interruption. After each run one record is written
 ``--out`` (atomically): alg, level, learner, seed, episodes, env steps, updates, wall
 minutes, the test win rate (and draws, losses, return) at each evaluation contexts, the run
 directory, the commit and the machine; the run's logs (config, train.csv, eval.csv) are
-copied to ``<out>_runs/`` so that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*``
-draws the learning curves whatever machine ran them. ``--env`` picks in-process arenas (the
+copied to ``<out>_runs/`` (the record's ``logs``, relative to the folder of ``--out``) so
+that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*`` draws the learning curves
+whatever machine ran them. ``--env`` picks in-process arenas (the
 default here: the same episodes as served arenas, without a server process competing for
 the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key (tests use it
 for tiny runs). Prints the table so far at the end (``--report``: only that, as Markdown
@@ -164,7 +165,11 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
     else:
         print(f"starting {run_dir}", flush=True)
     line = record(args, alg, level, seed, train(cfg, resume=resume))
-    line["logs"] = str(keep_logs(run_dir, args.out, args.learner))
+    # Relative to the table's own folder, so the record stays true wherever the table and
+    # its ``_runs`` folder are copied together (a run on another machine, into docs/data).
+    line["logs"] = (
+        keep_logs(run_dir, args.out, args.learner).relative_to(args.out.parent).as_posix()
+    )
     return line
 
 
