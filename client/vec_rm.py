@@ -207,7 +207,7 @@ class VecRM(VecArenaAPI):
         n = len(self._conns)
         calls: list[Call | dict[str, Any]] = [
             self._idle_reply(j)
-            if f is not None and n > 1 and not any(f)
+            if f is not None and not any(f)
             else conn.send(
                 VStep(
                     actions=part,
@@ -361,6 +361,14 @@ def check_action_rows(rows: Any, info: Mapping[str, Any], clip: bool = False) ->
     arenas clip). ``InvalidActionError`` names the arena and agent."""
     n_agents, n_actions = int(info["n_agents"]), int(info["n_actions"])
     continuous = info["action_space"] == "continuous"
+    if (
+        not continuous
+        and isinstance(rows, np.ndarray)
+        and rows.dtype.kind in "iu"
+        and rows.shape == (len(rows), n_agents)
+        and not ((rows < 0) | (rows >= n_actions)).any()
+    ):
+        return  # every row valid, checked at once (a sampler's step); else find the culprit
     for i, row in enumerate(rows):
         try:
             arr = np.asarray(row, dtype=np.float64)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Callable
+from typing import Any
 
 import msgpack
 import numpy as np
@@ -116,12 +117,18 @@ def test_a_server_with_no_active_arena_is_not_asked(
     with VecRM(seed=5, port=[a.port, b.port], num_envs=4, launch=False) as remote:
         local = VecArena(seed=5, num_envs=4)
         sent: list[int] = []
-        for conn in remote._conns:
+
+        def counting(conn: Any) -> Callable[..., Any]:
             original = conn.send
-            monkeypatch.setattr(
-                conn, "send", lambda body, *args, _o=original, _p=conn.port: (
-                    sent.append(_p), _o(body, *args))[1]
-            )  # fmt: skip
+
+            def send(body: Any, *args: Any) -> Any:
+                sent.append(conn.port)
+                return original(body, *args)
+
+            return send
+
+        for conn in remote._conns:
+            monkeypatch.setattr(conn, "send", counting(conn))
         try:
             remote.reset(seed=[1, 2, 3, 4])
             local.reset(seed=[1, 2, 3, 4])
