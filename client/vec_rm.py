@@ -252,7 +252,7 @@ class VecRM(VecArenaAPI):
     def _gather(self, calls: Sequence[Call | dict[str, Any]]) -> list[dict[str, Any]]:
         """Wait for every server's reply and keep the stacked arrays they carry."""
         values = [c if isinstance(c, dict) else c.result().value for c in calls]
-        self._cache = {k: np.concatenate([v[k] for v in values]) for k in STACKED}
+        self._cache = {k: _stacked(values, k) for k in STACKED}
         return values
 
     def _idle_reply(self, j: int) -> dict[str, Any]:
@@ -348,11 +348,16 @@ class _PendingStep(StepHandle):
     def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         if self._calls:  # the first call gathers the replies; later ones repeat them
             values = self._vec._gather(self._calls)
-            rewards = np.concatenate([v["rewards"] for v in values])
-            dones = np.concatenate([v["dones"] for v in values])
+            rewards, dones = _stacked(values, "rewards"), _stacked(values, "dones")
             infos = [info for v in values for info in v["infos"]]
             self._value, self._calls = (self._vec._obs_copy(), rewards, dones, infos), []
         return self._value
+
+
+def _stacked(values: list[dict[str, Any]], key: str) -> np.ndarray:
+    """The servers' arrays under ``key`` in arena order (one server's array as it came: a
+    decoded array is this client's own)."""
+    return values[0][key] if len(values) == 1 else np.concatenate([v[key] for v in values])
 
 
 def check_action_rows(rows: Any, info: Mapping[str, Any], clip: bool = False) -> None:

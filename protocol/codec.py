@@ -34,10 +34,20 @@ ALLOWED_KINDS = frozenset("biufc")
 """numpy dtype kinds that may cross the wire: bool, int, uint, float, complex."""
 MAX_NDIM = 32
 MAX_DTYPE_LEN = 16
+PACK_BUFFER = 16 << 10
+"""Bytes a packer starts with (it grows as needed). msgpack's default, 256 KiB, costs more
+to allocate than a step's whole message takes to pack."""
+
+
+_DTYPES: dict[str, np.dtype] = {}
+"""Wire dtype strings already vetted (a few at most: a payload's arrays repeat them)."""
 
 
 def _dtype_of(text: Any) -> np.dtype:
     """Parse and vet a wire dtype string; refuse anything that is not plain numbers."""
+    known = _DTYPES.get(text) if type(text) is str else None
+    if known is not None:
+        return known
     if not isinstance(text, str) or not 0 < len(text) <= MAX_DTYPE_LEN:
         raise MalformedMessageError(f"array dtype must be a short string, got {text!r}")
     try:
@@ -46,6 +56,8 @@ def _dtype_of(text: Any) -> np.dtype:
         raise MalformedMessageError(f"unknown array dtype {text!r}") from exc
     if dtype.kind not in ALLOWED_KINDS or dtype.fields is not None or dtype.subdtype:
         raise MalformedMessageError(f"array dtype {text!r} is not a plain numeric type")
+    if len(_DTYPES) < 64:  # numpy spells a dtype in finitely many ways; stay small anyway
+        _DTYPES[text] = dtype
     return dtype
 
 
@@ -53,7 +65,8 @@ def _array_payload(array: np.ndarray) -> bytes:
     if array.dtype.kind not in ALLOWED_KINDS or array.dtype.fields is not None:
         raise MalformedMessageError(f"cannot encode an array of dtype {array.dtype}")
     header = [array.dtype.str, list(array.shape)]
-    return msgpack.packb([*header, np.ascontiguousarray(array).tobytes()], use_bin_type=True)
+    data = np.ascontiguousarray(array).tobytes()
+    return msgpack.packb([*header, data], use_bin_type=True, buf_size=len(data) + 64)
 
 
 def _default(obj: Any) -> Any:
@@ -76,7 +89,10 @@ def encode(obj: Any) -> bytes:
     """Pack ``obj`` (None, bool, int, float, str, bytes, lists, tuples, dicts, numpy arrays
     and scalars) into msgpack bytes; raise ``MalformedMessageError`` for anything else."""
     try:
-        return msgpack.packb(obj, default=_default, use_bin_type=True, strict_types=True)
+        packer = msgpack.Packer(
+            default=_default, use_bin_type=True, strict_types=True, buf_size=PACK_BUFFER
+        )
+        return packer.pack(obj)
     except MalformedMessageError:
         raise
     except (TypeError, ValueError, OverflowError) as exc:
@@ -95,9 +111,12 @@ def _unpack_array(data: bytes) -> np.ndarray:
     dtype = _dtype_of(dtype_text)
     if not isinstance(shape, list) or len(shape) > MAX_NDIM:
         raise MalformedMessageError(f"array shape must be a list of at most {MAX_NDIM} ints")
-    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
-        raise MalformedMessageError(f"array shape must hold non-negative ints, got {shape!r}")
-    if not isinstance(raw, bytes) or math.prod(shape) * dtype.itemsize != len(raw):
+    count = 1
+    for n in shape:
+        if type(n) is not int or n < 0:
+            raise MalformedMessageError(f"array shape must hold non-negative ints, got {shape!r}")
+        count *= n
+    if type(raw) is not bytes or count * dtype.itemsize != len(raw):
         raise MalformedMessageError(
             f"array data must be {math.prod(shape)} × {dtype.itemsize} bytes for shape {shape}"
         )

@@ -11,7 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from neuronsmae.protocol.codec import EXT_NDARRAY, EXT_SCALAR, decode, encode
+from neuronsmae.protocol import codec
+from neuronsmae.protocol.codec import EXT_NDARRAY, EXT_SCALAR, PACK_BUFFER, decode, encode
 from neuronsmae.protocol.errors import (
     ERRORS,
     InvalidActionError,
@@ -77,6 +78,26 @@ def test_array_round_trip(dtype: str, shape: tuple[int, ...]) -> None:
     back = decode(encode(array), max_bytes=LIMIT)
     assert same(array, back)
     assert back.flags.writeable
+
+
+def test_arrays_larger_than_the_first_pack_buffer() -> None:
+    big = np.arange(3 * PACK_BUFFER, dtype=np.float64).reshape(3, -1)
+    value = {"a": big, "b": [big[0], b"x" * PACK_BUFFER]}
+    assert same(value, decode(encode(value), max_bytes=64 * PACK_BUFFER))
+
+
+def test_dtype_spellings_are_remembered_only_when_valid_and_few() -> None:
+    sizes = {"i": (1, 2, 4, 8), "u": (1, 2, 4, 8), "f": (2, 4, 8)}
+    spellings = [f"{o}{k}{n}" for o in "<>=|" for k, ns in sizes.items() for n in ns]
+    for text in spellings:
+        dtype = np.dtype(text)
+        payload = _ext(EXT_NDARRAY, [text, [1], b"\0" * dtype.itemsize])
+        assert decode(payload, max_bytes=LIMIT).dtype == dtype
+    assert len(codec._DTYPES) <= 64
+    for bad in ("|O", "<U4", "nonsense"):
+        with pytest.raises(MalformedMessageError):
+            decode(_ext(EXT_NDARRAY, [bad, [1], b"\0" * 4]), max_bytes=LIMIT)
+        assert bad not in codec._DTYPES
 
 
 def test_non_contiguous_and_special_values() -> None:
