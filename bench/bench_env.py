@@ -6,9 +6,10 @@ Measures decisions per second for 2 v 2 with the full referee in each action spa
 with LiDAR), and, interleaved in the same run, two baselines on the same PyBullet world with
 the same four robot bodies: ``bare step`` (only ``stepSimulation``, 20 per decision, robots
 moving and colliding) and ``bare drive`` (the least a planar-robot loop must do: set each
-robot's velocity, step, read each pose). Prints a Markdown table and writes
-bench/out/env.json. Medians of ``--repeats`` runs; every configuration is measured in turn
-within each repeat so that machine noise hits them alike.
+robot's velocity, step, read each pose); and the frames per second of ``Arena.render`` on
+the costliest frame (abstract 2 v 2 with LiDAR beams, mid-episode). Prints a Markdown table
+and writes bench/out/env.json. Medians of ``--repeats`` runs; every configuration is
+measured in turn within each repeat so that machine noise hits them alike.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ import pybullet as pb
 
 from bench.common import machine, rate, table, write_json
 from neuronsmae.server import Arena
+from neuronsmae.server.config import ArenaConfig
+from neuronsmae.server.sim.field import PHYSICS_DT
 from neuronsmae.server.sim.world import World
 
 CONFIGS = {
@@ -56,8 +59,18 @@ def arena_runner(options: dict, seed: int = 0):
     return one
 
 
+BARE_STEPS = 20
+"""Physics steps per 'decision' of the baselines (an abstract decision's 0.4 s)."""
+
+
+def seconds_per_decision(name: str) -> float:
+    """Simulated seconds one decision of configuration ``name`` covers."""
+    steps = ArenaConfig.from_options(CONFIGS[name]).period if name in CONFIGS else BARE_STEPS
+    return steps * PHYSICS_DT
+
+
 def bare_runners(seed: int = 0):
-    """Baselines on the same world: 20 physics steps per 'decision'."""
+    """Baselines on the same world: ``BARE_STEPS`` physics steps per 'decision'."""
     world = World(4)
     rng = np.random.default_rng(seed)
     poses = np.array([(1.0, 1.0, 0.0), (1.0, 3.5, 0.0), (7.0, 1.0, math.pi), (7.0, 3.5, 0.0)])
@@ -73,13 +86,13 @@ def bare_runners(seed: int = 0):
 
     def step_only() -> int:
         kick()
-        for _ in range(20):
+        for _ in range(BARE_STEPS):
             pb.stepSimulation(physicsClientId=cid)
         return 1
 
     def drive() -> int:
         vel = [(*rng.uniform(-1.5, 1.5, 2), 0.0) for _ in bodies]
-        for _ in range(20):
+        for _ in range(BARE_STEPS):
             for b, v in zip(bodies, vel, strict=True):
                 pb.resetBaseVelocity(b, v, (0.0, 0.0, 0.5), cid)
             pb.stepSimulation(physicsClientId=cid)
@@ -90,12 +103,36 @@ def bare_runners(seed: int = 0):
     return {"bare step": step_only, "bare drive": drive}
 
 
+RENDER = "render (frame with LiDAR)"
+"""The rendering runner's name: frames per second, not decisions."""
+
+
+def render_runner(seed: int = 0):
+    """A closure drawing one top-down frame of an abstract 2 v 2 with LiDAR beams (the
+    costliest frame) in mid-episode; returns 1."""
+    arena = Arena(seed=seed, action_space="abstract", lidar=True)
+    arena.reset({"level": "easy"})
+    rng = np.random.default_rng(seed)
+    for _ in range(10):
+        acts = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+        if arena.step(acts)[2]:
+            arena.reset({"level": "easy"})
+    arena.render()  # font and background caches
+
+    def one() -> int:
+        arena.render()
+        return 1
+
+    return one
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     runners = bare_runners() | {name: arena_runner(opts) for name, opts in CONFIGS.items()}
+    runners[RENDER] = render_runner()
     samples: dict[str, list[float]] = {name: [] for name in runners}
     for _ in range(args.repeats):
         for name, fn in runners.items():
@@ -103,11 +140,13 @@ def main() -> None:
     med = {name: float(np.median(v)) for name, v in samples.items()}
     rows = []
     for name, value in med.items():
+        if name == RENDER:
+            continue
         rows.append(
             {
                 "configuration": name,
                 "decisions/s (median)": value,
-                "× real time": value * 0.4,
+                "× real time": value * seconds_per_decision(name),
                 "% of bare step": 100 * value / med["bare step"],
                 "% of bare drive": 100 * value / med["bare drive"],
                 "min": float(min(samples[name])),
@@ -128,10 +167,23 @@ def main() -> None:
             ],
         )
     )
+    frames = med[RENDER]
+    render = {
+        "frames_per_s": frames,
+        "ms_per_frame": 1000 / frames,
+        "episode_of_51_frames_s": 51 / frames,
+        "min": float(min(samples[RENDER])),
+        "max": float(max(samples[RENDER])),
+    }
+    print(
+        f"{RENDER}: {frames:,.0f} frames/s (median), {render['ms_per_frame']:.1f} ms a frame, "
+        f"an episode's 51 frames in {render['episode_of_51_frames_s']:.2f} s"
+    )
     path = write_json(
         "env",
         {
             "rows": rows,
+            "render": render,
             "samples": samples,
             "machine": machine(),
             "seconds": args.seconds,

@@ -27,6 +27,17 @@ from neuronsmae.trainers.train import train
 
 OUT = Path(__file__).resolve().parent / "out"
 """Where the JSON reports go (ignored by git)."""
+TARGET = {"alg": "vdn", "level": "easy", "win_rate": 0.9, "minutes": 30}
+"""The project's learning target (docs/results.md)."""
+
+
+def target_met(alg: str, level: str, minutes: float, final: dict[str, Any]) -> bool | None:
+    """Whether this run meets the target: None when it is not the target's setting (another
+    algorithm or bot, or no time budget), else whether the final test win rate reached
+    the target's within a training budget (``--minutes``) of at most its minutes."""
+    if (alg, level) != (TARGET["alg"], TARGET["level"]) or not minutes > 0:
+        return None
+    return final["win_rate"] >= TARGET["win_rate"] and minutes <= TARGET["minutes"]
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -101,6 +112,12 @@ def main(argv: list[str] | None = None) -> int:
             f"greedy win rate {best['win_rate']:.3f} on the same {best['eval_episodes']} "
             "test episodes"
         )
+    met = target_met(args.alg, args.level, args.minutes, final)
+    if met is not None:
+        print(
+            f"target (VDN against easy, greedy win rate ≥ {TARGET['win_rate']} within "
+            f"{TARGET['minutes']} minutes): {'met' if met else 'not met'}"
+        )
     report = {
         "alg": args.alg,
         "level": args.level,
@@ -114,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         "counters": result["counters"],
         "start_replays": result["start_replays"],
         "total_seconds": total,
-        "target": {"win_rate": 0.9, "minutes": 30},
+        "target": {**TARGET, "met": met},
         "machine": {
             "cpus": os.cpu_count(),
             "python": platform.python_version(),

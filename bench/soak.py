@@ -42,7 +42,7 @@ def resources(proc: psutil.Process) -> dict[str, int]:
     }
 
 
-def soak(decisions: int, warmup: int, window: int, action_space: str) -> dict[str, Any]:
+def soak(decisions: int, warmup: int, action_space: str) -> dict[str, Any]:
     port = free_port()
     server = Server(port, "--time-scale", "0").wait_ready()
     server_ps, client_ps = psutil.Process(server.proc.pid), psutil.Process()
@@ -116,7 +116,7 @@ def main() -> int:
     if args.decisions < args.warmup + 2000:
         parser.error("--decisions must exceed --warmup by at least 2000")
     load_before = psutil.getloadavg()
-    run = soak(args.decisions, args.warmup, args.window, args.action_space)
+    run = soak(args.decisions, args.warmup, args.action_space)
     baseline = float(np.percentile(run["latency"][args.warmup : args.warmup + 1000], 99) * 1000)
     rows = windows(run["latency"], args.warmup, args.window)
     base, end = run["base"], run["end"]

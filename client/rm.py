@@ -48,11 +48,13 @@ class RM(ArenaAPI):
     (the default) launches a private server on a free loopback port, so any number of
     clients run side by side; an explicit port (the released wrapper's call,
     ``RM(seed=1234, port=10000, ...)``) uses the server there, or starts one on it when
-    nothing listens on a local ``host`` and ``launch`` is True. ``time_scale``,
-    ``no_graphics`` and ``busy_poll_us`` only apply to a server launched this way, which is
-    stopped by :meth:`close`. Every request waits at most ``timeout`` seconds, then raises
-    ``ServerUnavailableError``; if the server comes back, the next request configures it
-    again and carries on (the episode in progress is lost).
+    nothing listens on a local ``host`` and ``launch`` is True. ``time_scale`` and
+    ``busy_poll_us`` only apply to a server launched this way, which is stopped by
+    :meth:`close`. ``no_graphics`` is the released signature's flag and changes nothing: a
+    server is always headless, and ``render()`` returns frames either way. Every request
+    waits at most ``timeout`` seconds, then raises ``ServerUnavailableError``; if the server
+    comes back, the next request configures it again and carries on (the episode in progress
+    is lost).
 
     ``time_scale`` caps simulated time at that many times real time (the released build's
     Unity time scale; 100 by default, as released; 0 = unlimited).

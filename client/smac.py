@@ -183,10 +183,20 @@ class SMACEnv(Recipe):
     # ---- the rest of SMAC's methods -----------------------------------------------------
 
     def render(self, mode: str = "rgb_array") -> np.ndarray | None:
-        """The top-down RGB frame; with ``render_mode="human"`` the window is updated after
-        every step by itself and this returns None."""
+        """The top-down RGB frame (``mode="rgb_array"``). A window (``mode="human"``) is
+        chosen when the environment is built (``render_mode="human"``): it is then updated
+        after every step by itself and this returns None."""
+        if mode not in ("rgb_array", "human"):
+            raise InvalidOptionError(
+                f"render mode {mode!r} is not valid; valid: 'rgb_array', 'human'"
+            )
         if self._renderer.window is not None:
             return None
+        if mode == "human":
+            raise InvalidOptionError(
+                "render(mode='human') needs a window: build the environment with "
+                "render_mode='human' (where there is a display); render() returns frames"
+            )
         return np.asarray(self.arena.render(), dtype=np.uint8)
 
     def close(self) -> None:

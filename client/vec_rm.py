@@ -67,9 +67,9 @@ class VecRM(VecArenaAPI):
     ``launch``). A running server must hold exactly its share of the arenas
     (``neuronsmae-server --arenas``), else ``InvalidOptionError`` says what it holds.
     ``seed`` and ``**options`` are those of ``VecArena(seed, num_envs, **options)``;
-    ``host``, ``timeout``, ``router``, ``no_graphics``, ``time_scale`` and ``busy_poll_us``
-    are ``RM``'s, except that ``time_scale`` defaults to 0 (unpaced): a vector client is
-    there for throughput.
+    ``host``, ``timeout``, ``router``, ``time_scale`` and ``busy_poll_us`` are ``RM``'s,
+    except that ``time_scale`` defaults to 0 (unpaced): a vector client is there for
+    throughput; ``no_graphics``, as in ``RM``, changes nothing (servers are headless).
     """
 
     def __init__(

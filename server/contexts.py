@@ -141,8 +141,12 @@ def context_table() -> list[dict[str, Any]]:
 def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
     """Validate a reset's contexts; raise InvalidContextError naming the key and what is valid."""
     contexts = dict(contexts or {})
-    if not all(isinstance(key, str) for key in contexts):
-        raise InvalidContextError("context keys must be strings")
+    bad = [key for key in contexts if not isinstance(key, str)]
+    if bad:
+        raise InvalidContextError(
+            f"context keys must be strings, got {bad[:5]!r}; valid keys: "
+            f"{sorted([*CONTEXT_TABLE, 'level', 'bot_team'])}"
+        )
     values: dict[str, float] = {}
     level, bot_team = DEFAULT_LEVEL, "none"
     for key, value in contexts.items():

@@ -15,10 +15,11 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
+from neuronsmae.protocol.errors import InvalidContextError
+from neuronsmae.protocol.levels import level_error, level_from_arg, level_value
 from neuronsmae.trainers.agent import masked_greedy
 from neuronsmae.trainers.buffer import Episode
 from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
-from neuronsmae.trainers.config import LEVELS
 from neuronsmae.trainers.learner import AgentSpec
 from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
 from neuronsmae.trainers.task import trained_options
@@ -127,6 +128,9 @@ def evaluate_checkpoint(
 ) -> dict[str, Any]:
     """Play a checkpoint greedily against the ``level`` bot for ``episodes`` episodes.
 
+    ``level`` is a bot name or a released level, as a number or as a command line gives it
+    ("0", "1"); anything else raises ``InvalidContextError`` listing the valid levels.
+
     Episode ``k`` is reset with seed ``seed + k``, so two checkpoints evaluated with the same
     arguments meet exactly the same starts. ``contexts`` adds reset contexts (e.g.
     ``{"coef": 1.5}``). ``envs`` arenas play at once (``env="remote"``: on a server at
@@ -135,10 +139,12 @@ def evaluate_checkpoint(
     ``level``, ``seed``, ``checkpoint``, the run's ``alg`` and its training
     ``episodes_trained``.
     """
-    if isinstance(level, str) and level not in LEVELS:
-        raise ValueError(f"unknown level {level!r}; valid: {', '.join(LEVELS)}, 0, 1, 2")
+    chosen = level_value(level_from_arg(level) if isinstance(level, str) else level)
+    if chosen is None:
+        raise InvalidContextError(level_error("level", level))
     if episodes < 1:
         raise ValueError(f"episodes must be ≥ 1, got {episodes}")
+    level = chosen
     payload = load_checkpoint(path)
     policy = load_policy(path)
     options = {**trained_options(payload["config"]), "mode": "cooperative"}

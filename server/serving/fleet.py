@@ -62,7 +62,13 @@ def read_state(path: Path) -> dict[int, dict[str, object]]:
     """Port → recorded server entry, from a running fleet's state file (empty if none)."""
     try:
         state = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:
+        log.warning("ignoring unreadable fleet state file %s: %s", path, exc)
+        return {}
+    if not isinstance(state, dict) or not isinstance(state.get("servers", []), list):
+        log.warning("ignoring fleet state file %s: not a fleet's state", path)
         return {}
     if not _pid_alive(state.get("fleet_pid")):
         return {}
@@ -173,7 +179,10 @@ def _status_parser() -> argparse.ArgumentParser:
 
 def _spec(args: argparse.Namespace, **extra: object) -> FleetSpec:
     if not (args.base_port > 0 and args.base_port + args.count <= 65536 and args.count >= 1):
-        raise ValueError("--count must be ≥ 1 and every port in 1..65535")
+        raise ValueError(
+            f"--base-port {args.base_port} --count {args.count}: --count must be ≥ 1 and "
+            "every port (--base-port to --base-port + --count - 1) in 1..65535"
+        )
     return FleetSpec(
         base_port=args.base_port,
         count=args.count,

@@ -123,8 +123,8 @@ def test_a_busy_polling_server_plays_the_same_and_stops_promptly(
             local.close()
         remote.step([0, 0])
         t0 = time.monotonic()  # the server is polling for the next request now
-        assert server.stop(signal.SIGTERM) == 0
-    assert time.monotonic() - t0 < 1.0
+        assert server.stop(signal.SIGTERM) == 0  # exited by itself (stop() kills after 10 s)
+    assert time.monotonic() - t0 < 5.0  # a guard; the exit status above is the check
 
 
 @pytest.mark.parametrize(
@@ -316,16 +316,16 @@ def test_dead_hung_and_restarted_server(start_server: Callable[..., Server]) -> 
         env.reset()
         server.proc.send_signal(signal.SIGSTOP)  # hung: the query times out
         t0 = time.monotonic()
-        with pytest.raises(ServerUnavailableError):
+        with pytest.raises(ServerUnavailableError, match="within 2 s"):
             env.get_env_info()
-        assert 1.5 < time.monotonic() - t0 < 3.0
+        assert 1.5 < time.monotonic() - t0 < 6.0  # waited for the timeout, and not for good
         server.proc.send_signal(signal.SIGCONT)
         server.proc.kill()  # dead: Zenoh ends the query at once
         server.proc.wait()
         t0 = time.monotonic()
         with pytest.raises(ServerUnavailableError):
             env.step([0, 0])
-        assert time.monotonic() - t0 < 2.5
+        assert time.monotonic() - t0 < 1.5  # before the 2 s timeout: noticed, not waited out
         restarted = start_server(port=port)  # back: the client configures it again
         deadline = time.monotonic() + 30
         while True:
@@ -339,8 +339,8 @@ def test_dead_hung_and_restarted_server(start_server: Callable[..., Server]) -> 
     finally:
         env.close()
     t0 = time.monotonic()
-    assert restarted.stop(signal.SIGTERM) == 0
-    assert time.monotonic() - t0 < 1.0
+    assert restarted.stop(signal.SIGTERM) == 0  # exited by itself (stop() kills after 10 s)
+    assert time.monotonic() - t0 < 5.0
 
 
 def test_port_in_use_fails_clearly(server_a: Server) -> None:

@@ -129,10 +129,20 @@ def test_the_reward_is_the_team_reward(make: Callable[..., SMACEnv]) -> None:
 def test_actions_accept_anything_int_takes_and_refuse_the_rest(
     make: Callable[..., SMACEnv],
 ) -> None:
-    env = make()
-    env.reset()
-    env.step([torch.tensor(0), torch.tensor([1])])  # 0-d and one-element tensors
-    env.step([np.int32(2), 3.0])
+    env = make(seed=5)
+    arena = Arena(seed=5, **SHORT)
+    try:
+        env.reset()
+        arena.reset(None, None)
+        # 0-d and one-element tensors, numpy ints and integral floats act as those ints do
+        for loose, plain in (([torch.tensor(0), torch.tensor([1])], [0, 1]),
+                             ([np.int32(2), 3.0], [2, 3])):  # fmt: skip
+            reward, _, _ = env.step(loose)
+            _, rewards, _, _ = arena.step(plain)
+            assert reward == float(rewards[0])
+            assert same(env.get_obs(), list(arena.get_obs()))
+    finally:
+        arena.close()
     with pytest.raises(InvalidActionError, match="agent 1: an action is an integer"):
         env.step([0, "left"])
     with pytest.raises(InvalidActionError, match="expected 2 actions"):
@@ -163,6 +173,11 @@ def test_render_save_replay_and_pickling(make: Callable[..., SMACEnv]) -> None:
     env.reset()
     frame = env.render()
     assert frame is not None and frame.dtype == np.uint8 and frame.shape[2] == 3
+    assert same(env.render("rgb_array"), frame)
+    with pytest.raises(InvalidOptionError, match="render_mode='human'"):
+        env.render("human")  # no window was asked for when the environment was built
+    with pytest.raises(InvalidOptionError, match="'rgb_array', 'human'"):
+        env.render("ansi")
     assert env.save_replay() is None
     copy = pickle.loads(pickle.dumps(env))
     try:

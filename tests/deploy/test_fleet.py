@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from neuronsmae.protocol.launch import ServerCommand
-from neuronsmae.server.serving.fleet import main, status
+from neuronsmae.server.serving.fleet import main, read_state, status
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec, FleetStartError, Member
 
 from .conftest import free_ports, listening, server_cmd, stop, wait_for
@@ -131,3 +131,22 @@ def test_bad_count_is_a_usage_error() -> None:
     with pytest.raises(SystemExit) as exc:
         main(["--count", "0"])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"servers": 3}', '"x"'])
+def test_an_unreadable_state_file_counts_as_no_fleet(
+    text: str, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    state = tmp_path / "state.json"
+    state.write_text(text)
+    with caplog.at_level("WARNING", logger="neuronsmae.serve"):
+        assert read_state(state) == {}
+    assert "ignoring" in caplog.text and str(state) in caplog.text
+    assert read_state(tmp_path / "absent.json") == {}
+
+
+def test_bad_ports_name_both_flags(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["status", "--base-port", "65535", "--count", "3"])
+    assert exc.value.code == 2
+    assert "--base-port 65535 --count 3" in capsys.readouterr().err

@@ -188,6 +188,7 @@ def test_original_context_dicts_work() -> None:
         ({"M": float("nan")}, "M"),
         ({"KP": "fast"}, "KP"),
         ({"level": [1]}, "level"),
+        ({1: 0.5}, r"got \[1\]; valid keys: \[.*'coef'"),
     ],
 )
 def test_bad_contexts_name_the_key(contexts: dict, needle: str) -> None:

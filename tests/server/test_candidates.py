@@ -170,7 +170,7 @@ def test_other_k(k: int) -> None:
 
 
 def test_input_validation() -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="k and n_samples must be positive"):
         candidate_points(np.array([4.0, 2.0]), np.zeros((0, 2)), BOXES, k=0)
 
 

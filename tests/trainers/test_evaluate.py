@@ -97,3 +97,13 @@ def test_a_checkpoint_is_evaluated_on_the_task_it_trained_on(tmp_path: Path) -> 
     result = evaluate_checkpoint(path, "random", episodes=2, seed=3, envs=2)
     assert result["eval_episodes"] == 2 and result["level"] == "random"
     assert result["mean_return"] in (-1.0, 0.0, 1.0, -0.5, 0.5)  # sparse: ±1 or 0 per episode
+
+
+@pytest.mark.parametrize("level", ["2", 2, "medium", 1.5, True])
+def test_an_unknown_level_is_refused_before_anything_loads(level: object, tmp_path: Path) -> None:
+    from neuronsmae.protocol.errors import InvalidContextError
+    from neuronsmae.trainers.evaluate import evaluate_checkpoint
+
+    with pytest.raises(InvalidContextError, match="'easy', 'middle' and 'hard'") as err:
+        evaluate_checkpoint(tmp_path / "missing.pt", level, episodes=1, seed=0)  # type: ignore[arg-type]
+    assert repr(level) in str(err.value)

@@ -86,10 +86,15 @@ def test_a_checkpoint_against_every_bot_and_released_level_on_either_side(
     for level in LEVEL_ARGS:
         as_blue = M.play(a, level, 1, 7, arenas=1)
         as_red = M.play(level, a, 1, 7, arenas=1)
-        for result in (as_blue, as_red):
-            assert result["winners"][0] in ("blue", "red", "draw")
+        for result, (blue, red) in ((as_blue, (a, level)), (as_red, (level, a))):
+            assert (result["blue"], result["red"]) == (blue, red)
+            (winner,) = result["winners"]
+            assert winner in ("blue", "red", "draw")
+            assert result[f"{winner}_rate" if winner == "draw" else f"{winner}_win_rate"] == 1.0
             rates = result["blue_win_rate"] + result["red_win_rate"] + result["draw_rate"]
             assert rates == 1.0
+    again = M.play(a, "hard", 3, 7, arenas=1)
+    assert again["winners"] == M.play(a, "hard", 3, 7, arenas=3)["winners"]  # same starts
 
 
 @pytest.mark.slow
