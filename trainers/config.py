@@ -97,7 +97,7 @@ class TrainConfig:
     is the paper's budget (20 workers × 1,501 iterations); on a 2-core machine
     ``max_minutes`` ends the run long before it."""
     max_minutes: float = 30.0
-    """Wall-clock budget of this session's training in minutes (0: none; a resumed run gets a
+    """Wall-clock budget of this invocation's training in minutes (0: none; a resumed run gets a
     fresh budget); the final evaluation follows. 30 minutes is the target run's budget
     (VDN against the easy bot, docs/results.md), so the default run is that run."""
     out: str = ""

@@ -79,7 +79,7 @@ def test_server_killed_mid_step_then_mid_reset(start_server: Callable[..., Serve
         server.proc.kill()
         thread.join(TIMEOUT + 5)
         assert isinstance(out.get("error"), ServerUnavailableError), out
-        assert out["at"] - killed < 1.0
+        assert out["at"] - killed < TIMEOUT / 2  # noticed, not waited out
 
         server = start_server("--time-scale", str(TIME_SCALE), port=port)
         _recovers(env, seed=6)
@@ -91,7 +91,7 @@ def test_server_killed_mid_step_then_mid_reset(start_server: Callable[..., Serve
         server.proc.kill()
         thread.join(TIMEOUT + 5)
         assert isinstance(out.get("error"), ServerUnavailableError), out
-        assert out["at"] - killed < 1.0
+        assert out["at"] - killed < TIMEOUT / 2  # noticed, not waited out
 
         with pytest.raises(ServerUnavailableError):  # and at once while none is back
             env.reset()

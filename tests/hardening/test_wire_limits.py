@@ -9,6 +9,7 @@ from __future__ import annotations
 import ast
 import pickle
 import time
+import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -117,11 +118,23 @@ def test_worst_case_payloads_under_the_limit_cost_what_msgpack_itself_costs(case
     assert ours <= 10.0 * plain + 0.01, (ours, plain)
 
 
-def test_every_length_the_decoder_may_allocate_is_capped() -> None:
-    """No declared length above the message size is believed (the cap is the size itself)."""
-    for prefix in (b"\xdd", b"\xdf", b"\xc6", b"\xdb", b"\xc9"):
-        with pytest.raises(MalformedMessageError):
-            decode(prefix + (64).to_bytes(4, "big") + b"\x00" * 8, max_bytes=32)
+@pytest.mark.parametrize(
+    ("prefix", "refusal"),
+    [(b"\xdd", "exceeds max_array_len"), (b"\xdf", "exceeds max_map_len"),
+     (b"\xc6", "truncated"), (b"\xdb", "truncated"), (b"\xc9", "exceeds max_ext_len")],
+)  # fmt: skip
+def test_every_length_the_decoder_may_allocate_is_capped(prefix: bytes, refusal: str) -> None:
+    """A declared length of 4 Gi (array, map, bin, str, ext) in a 13-byte message is never
+    believed: arrays, maps and extensions are refused by the cap on their length, bin and
+    str because the bytes never come; nothing near the declared size is allocated."""
+    tracemalloc.start()
+    try:
+        with pytest.raises(MalformedMessageError, match=refusal):
+            decode(prefix + (2**32 - 1).to_bytes(4, "big") + b"\x00" * 8, max_bytes=32)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20
 
 
 def test_pickle_payload_gets_a_typed_refusal_from_the_service() -> None:

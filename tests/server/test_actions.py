@@ -45,11 +45,27 @@ def test_bad_actions_raise_naming_agent_and_bound(space: str, actions, needle: s
 
 
 def test_clip_option_clips_instead() -> None:
-    a = Arena(seed=1, action_space="continuous", clip_actions=True)
-    a.reset()
-    a.step([[9.0, -9.0, 5.0, 3], [0, 0, 0, 0]])
-    assert a.cmd.shape == (4, 3)
-    a.close()
+    """Out-of-bound motions and targets play exactly as the bounds they are clipped to."""
+    from neuronsmae.server.task.actions import V_MAX, W_MAX
+
+    clipped, bounded = (Arena(seed=1, action_space="continuous", clip_actions=True)
+                        for _ in range(2))  # fmt: skip
+    try:
+        clipped.reset()
+        bounded.reset()
+        for _ in range(3):
+            clipped.step([[9.0, -9.0, 5.0, 3.4], [0, 0, -7.0, -2]])
+            bounded.step([[V_MAX, -V_MAX, W_MAX, 1], [0, 0, -W_MAX, 0]])
+        np.testing.assert_array_equal(clipped.get_state(), bounded.get_state())
+        moved = Arena(seed=1, action_space="continuous", clip_actions=True)
+        moved.reset()
+        for _ in range(3):
+            moved.step([[0, 0, 0, 1], [0, 0, 0, 0]])  # the same targets, standing still
+        assert not np.array_equal(clipped.get_state(), moved.get_state())  # the motion acted
+        moved.close()
+    finally:
+        clipped.close()
+        bounded.close()
 
 
 def test_masks_for_dead_robots_and_dead_enemies() -> None:

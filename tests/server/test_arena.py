@@ -159,12 +159,22 @@ def test_determinism_within_and_across_processes() -> None:
 
 
 def test_two_arenas_in_one_process_do_not_interfere() -> None:
-    a, b = Arena(seed=9), Arena(seed=9)
-    oa, ob = a.reset(), b.reset()
+    """Arena a plays as it does alone while b, another seed with other actions, steps in
+    between each of its steps."""
+    alone = Arena(seed=9)
+    alone.reset()
     for _ in range(10):
-        oa, *_ = a.step([1, 2])
-        ob, *_ = b.step([1, 2])
-    np.testing.assert_array_equal(np.stack(oa), np.stack(ob))
+        want, *_ = alone.step([1, 2])
+    alone.close()
+    a, b = Arena(seed=9), Arena(seed=4)
+    a.reset()
+    b.reset({"level": "hard"})
+    for t in range(10):
+        got, *_ = a.step([1, 2])
+        _, _, done, _ = b.step([t % 8, 7 - t % 8])
+        if done:
+            b.reset()
+    np.testing.assert_array_equal(np.stack(got), np.stack(want))
     assert a.world.client != b.world.client
     a.close()
     b.close()

@@ -152,7 +152,7 @@ def test_delay_is_an_exact_shift_for_a_single_axis() -> None:
 def test_delay_quantisation() -> None:
     ch = Chassis(1)
     assert [ch.delay_steps(s) for s in (0.0, 0.009, 0.01, 0.029, 0.03, 0.1)] == [0, 0, 1, 1, 2, 5]
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="command delay must be finite and >= 0"):
         ch.delay_steps(-0.02)
 
 
@@ -231,9 +231,9 @@ def test_stop_freezes_a_robot_until_reset() -> None:
 
 def test_bad_input_rejected() -> None:
     ch = Chassis(2)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"cmd must have shape \(2, 3\)"):
         ch.step(np.zeros((3, 3)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="need 2 ChassisParams, got 1"):
         ch.reset([ChassisParams()])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="not a multiple of sub_dt"):
         Chassis(1, physics_dt=0.02, sub_dt=0.0003)

@@ -136,13 +136,13 @@ def test_partial_observability_hides_enemy_behind_tall_obstacle() -> None:
     o = obs[0]
     np.testing.assert_allclose(o[6:9], [-1.0, -1.0, -1.0])  # red_0 padded
     assert not np.allclose(o[9:12], -1.0)  # red_1 seen
+    hidden = [(4.04 - 4.04) / 4.04, (4.1 - 2.24) / 2.24, -0.5]  # red_0's pose, normalised
+    np.testing.assert_allclose(a.get_state()[10:13], hidden, atol=1e-6)  # the state is global
     # With full observability the same scene shows both.
     b = Arena(seed=1, mode="competitive", action_space="discrete")
     b.reset()
     full = b.place(scene)[0]
-    np.testing.assert_allclose(
-        full[6:9], [(4.04 - 4.04) / 4.04, (4.1 - 2.24) / 2.24, -0.5], atol=1e-6
-    )
+    np.testing.assert_allclose(full[6:9], hidden, atol=1e-6)
     a.close()
     b.close()
 

@@ -8,7 +8,7 @@ import pytest
 from neuronsmae.server import Arena
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.sim.zones import EFFECT_PAIRS
-from tests.server.conftest import still
+from tests.server.conftest import duel, still
 
 
 def _on_zones(seed: int) -> tuple[Arena, dict]:
@@ -61,6 +61,30 @@ def test_frozen_robot_does_not_move_and_zone_is_spent() -> None:
         a.close()
         return
     pytest.fail("no seed dealt a no-move zone onto F1, F2 or F4")
+
+
+def test_silenced_robot_deals_no_damage_where_it_otherwise_would() -> None:
+    """A robot that took a no-shoot zone, put in a duel it wins without the zone (the same
+    duel in a zone-less arena), hits nothing while silenced."""
+    for seed in range(30):
+        a, info = _on_zones(seed)
+        robots = [r for _, _, e, r in info["zone_log"] if e == "no_shoot" and r in (0, 2)]
+        if not robots:
+            a.close()
+            continue
+        shooter_is_blue = robots[0] == 0
+        assert a.zones.silenced(a.t)[robots[0]]
+        lanes = ((1.0, 2.24, 0.0), (3.0, 2.24, np.pi))  # the centre line, 2 m apart
+        silenced, _ = duel(a, *lanes, victim_is_red=shooter_is_blue)
+        a.close()
+        plain = Arena(seed=seed, mode="competitive", action_space="continuous")
+        plain.reset()
+        armed, _ = duel(plain, *lanes, victim_is_red=shooter_is_blue)
+        plain.close()
+        victim = 2 if shooter_is_blue else 0
+        assert armed[victim] > 0 and silenced[victim] == 0
+        return
+    pytest.fail("no seed dealt a no-shoot zone onto F1 or F4")
 
 
 def test_zones_off_by_default() -> None:

@@ -138,7 +138,7 @@ def test_resource_strings() -> None:
     }
     assert parse_resources("") == {}
     for bad in ("CPU=1", "x=0", "=2", "x=two"):
-        with pytest.raises(ConfigError):
+        with pytest.raises(ConfigError, match=f"resource '{bad}': expected"):
             parse_resources(bad)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="servers='cloud' is not valid; valid: local, actors"):
         make_config({"servers": "cloud"})

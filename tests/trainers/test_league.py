@@ -57,7 +57,7 @@ def test_a_league_of_three_policies_rates_them_and_draws_the_matrix(tmp_path: Pa
     totals = {names[i]: sum(v for v in m[i] if v is not None) for i in range(3)}
     order = [r["player"] for r in league["ratings"]]
     best, worst = max(totals, key=totals.get), min(totals, key=totals.get)
-    assert totals[best] == totals[worst] or order.index(best) < order.index(worst)
+    assert totals[best] > totals[worst] and order.index(best) < order.index(worst)
     assert len(league["pairs"]) == 6  # three pairs, each colour once
     assert sum(p["episodes"] for p in league["pairs"]) == 3 * 4
     assert "| 1 |" in (out / "league.md").read_text()

@@ -53,8 +53,27 @@ def test_opponents_batched_over_arenas_play_as_one_at_a_time() -> None:
             assert np.array_equal(a.actions, b.actions) and np.array_equal(a.state, b.state)
             assert a.info["winner"] == b.info["winner"]
     assert alone[0].obs.shape[1] == 2  # blue's rows only
-    # the opponents differ: the two snapshots' episodes from the same start part ways
-    assert not np.array_equal(alone[0].state, alone[2].state)
+
+
+def test_the_opponent_sent_is_the_one_that_plays() -> None:
+    """One start against each snapshot: the same first state, then the episodes part ways,
+    and the first is the batched run's episode against that snapshot."""
+    worker = RolloutWorker(0, "inprocess", 9, None, {"mode": "competitive"}, 1)
+    try:
+        info = blue_view(EnvInfo.from_dict(worker.env_info()))
+        blue = _policy(info, 1)
+        pool = {"self:0": _policy(info, 2), "self:5": _policy(info, 3)}
+        first, second = (
+            worker.run(blue, 0, [Request(40, 0.0, {"level": "easy", "bot_team": "none"},
+                                         opponent=o)], pool, 0)[0]
+            for o in ("self:0", "self:5")
+        )  # fmt: skip
+    finally:
+        worker.close()
+    assert np.array_equal(first.state[0], second.state[0])
+    assert not np.array_equal(first.state, second.state)
+    batched, _ = _play(envs=3, groups=1)
+    assert np.array_equal(first.state, batched[0].state)
 
 
 def test_a_bot_on_red_plays_as_in_the_cooperative_task() -> None:

@@ -70,6 +70,9 @@ def test_same_seed_same_greedy_episode(worker: RolloutWorker) -> None:
     a = worker.run_episode(policy, 0, 0.0, seed=3, contexts={"level": "easy"})
     b = worker.run_episode(policy, 0, 0.0, seed=3, contexts={"level": "easy"})
     assert np.array_equal(a.actions, b.actions) and np.allclose(a.rewards, b.rewards)
+    assert np.array_equal(a.state, b.state)
+    other = worker.run_episode(policy, 0, 0.0, seed=4, contexts={"level": "easy"})
+    assert not np.array_equal(a.state[0], other.state[0])  # the seed reaches the arena
 
 
 def test_env_failure_mid_episode_returns_nothing(worker: RolloutWorker) -> None:
@@ -119,6 +122,9 @@ def test_exploring_episodes_are_whole_and_keep_their_own_epsilon() -> None:
         for request, episode in zip(requests, episodes, strict=True):
             buf.add(episode)  # validates every row: none half-played
             assert episode.info["epsilon"] == request.epsilon and episode.terminated
+            greedy = worker.run(policy, 0, [Request(request.seed, 0.0, request.contexts)])[0]
+            explored = not np.array_equal(episode.actions, greedy.actions)
+            assert explored == (request.epsilon == 1.0)  # each arena at its own epsilon
         assert worker.run(policy, 0, []) == []
     finally:
         worker.close()

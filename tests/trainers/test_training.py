@@ -88,9 +88,13 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     result = evaluate_checkpoint(out, "easy", episodes=2, seed=7)
     assert 0.0 <= result["win_rate"] <= 1.0 and result["eval_episodes"] == 2
     assert result["episodes_trained"] == 12 and result["alg"] == "qmix"
-    policy = GreedyPolicy(out / "checkpoint.pt")
-    actions = policy.act([np.zeros(37, np.float32)] * 2, [np.eye(8, dtype=np.int8)[3]] * 2)
-    assert actions == [3, 3]
+    policy, probe = GreedyPolicy(out / "checkpoint.pt"), GreedyPolicy(out / "checkpoint.pt")
+    obs = list(np.random.default_rng(0).random((2, 37), dtype=np.float32))
+    q = probe.q_values(obs)  # the checkpoint's Q; the greedy choice among actions 3 and 5
+    want = [3 if q[i, 3] > q[i, 5] else 5 for i in range(2)]
+    mask = np.zeros(8, np.int8)
+    mask[[3, 5]] = 1
+    assert policy.act(obs, [mask, mask]) == want
 
 
 def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
