@@ -51,12 +51,14 @@ def test_every_torch_load_in_the_project_is_weights_only() -> None:
     for pkg in ("trainers", "server", "client", "protocol", "bench"):
         for path in sorted((REPO / pkg).rglob("*.py")):
             for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("torch"):
+                    # a bare ``load`` would escape the attribute check below
+                    assert "load" not in {a.name for a in node.names}, f"{path}:{node.lineno}"
                 if (
                     isinstance(node, ast.Call)
                     and isinstance(node.func, ast.Attribute)
                     and node.func.attr == "load"
-                    and isinstance(node.func.value, ast.Name)
-                    and node.func.value.id == "torch"
+                    and ast.unparse(node.func.value) in ("torch", "torch.serialization")
                 ):
                     safe = any(
                         kw.arg == "weights_only"

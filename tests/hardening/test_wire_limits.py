@@ -167,14 +167,13 @@ def _unsafe_uses(path: Path) -> list[str]:
         else:
             names = []
         found += [f"{path.name}:{node.lineno} imports {n}" for n in names if n in UNSAFE_MODULES]
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "torch":
+            found += [f"{path.name}:{node.lineno} imports torch's {a.name}"
+                      for a in node.names if a.name in UNSAFE_CALLS]  # fmt: skip
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
-            owner = node.func.value
-            if (
-                node.func.attr in UNSAFE_CALLS
-                and isinstance(owner, ast.Name)
-                and owner.id in {*UNSAFE_MODULES, "torch"}
-            ):
-                found.append(f"{path.name}:{node.lineno} calls {owner.id}.{node.func.attr}")
+            owner = ast.unparse(node.func.value)  # torch, torch.serialization, pickle, ...
+            if node.func.attr in UNSAFE_CALLS and owner.split(".")[0] in {*UNSAFE_MODULES, "torch"}:
+                found.append(f"{path.name}:{node.lineno} calls {owner}.{node.func.attr}")
             for kw in node.keywords:
                 if kw.arg == "allow_pickle" and not (
                     isinstance(kw.value, ast.Constant) and kw.value.value is False
@@ -195,5 +194,6 @@ def test_the_scanner_would_notice_pickle(tmp_path: Path) -> None:
     bad.write_text(
         "import pickle\nfrom dill import loads\nimport numpy as np\nimport torch\n"
         "pickle.loads(b'')\nnp.load('x', allow_pickle=True)\ntorch.load('x')\n"
+        "from torch import load\ntorch.serialization.load('x')\n"
     )
-    assert len(_unsafe_uses(bad)) == 5
+    assert len(_unsafe_uses(bad)) == 7
