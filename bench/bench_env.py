@@ -35,6 +35,11 @@ CONFIGS = {
 }
 
 
+def random_available(arena: Arena, rng: np.random.Generator) -> list[int]:
+    """A random available action for every agent (abstract or discrete)."""
+    return [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+
+
 def arena_runner(options: dict, seed: int = 0):
     """A closure playing one decision with random available actions; returns 1."""
     arena = Arena(seed=seed, **options)
@@ -50,7 +55,7 @@ def arena_runner(options: dict, seed: int = 0):
                 for _ in range(n)
             ]
         else:
-            acts = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
+            acts = random_available(arena, rng)
         _, _, done, _ = arena.step(acts)
         if done:
             arena.reset({"level": "easy"})
@@ -114,8 +119,7 @@ def render_runner(seed: int = 0):
     arena.reset({"level": "easy"})
     rng = np.random.default_rng(seed)
     for _ in range(10):
-        acts = [int(rng.choice(np.flatnonzero(m))) for m in arena.get_avail_actions()]
-        if arena.step(acts)[2]:
+        if arena.step(random_available(arena, rng))[2]:
             arena.reset({"level": "easy"})
     arena.render()  # font and background caches
 

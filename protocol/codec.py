@@ -19,7 +19,6 @@ structured and datetime arrays are refused both ways.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -118,7 +117,7 @@ def _unpack_array(data: bytes) -> np.ndarray:
         count *= n
     if type(raw) is not bytes or count * dtype.itemsize != len(raw):
         raise MalformedMessageError(
-            f"array data must be {math.prod(shape)} × {dtype.itemsize} bytes for shape {shape}"
+            f"array data must be {count} × {dtype.itemsize} bytes for shape {shape}"
         )
     # A copy, so callers get a writable array that does not pin the message buffer.
     return np.frombuffer(raw, dtype=dtype).reshape(shape).copy()

@@ -138,14 +138,18 @@ def context_table() -> list[dict[str, Any]]:
     return rows
 
 
+def _valid_keys() -> list[str]:
+    """Every key a reset's contexts may hold, for error messages."""
+    return sorted([*CONTEXT_TABLE, "level", "bot_team"])
+
+
 def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
     """Validate a reset's contexts; raise InvalidContextError naming the key and what is valid."""
     contexts = dict(contexts or {})
     bad = [key for key in contexts if not isinstance(key, str)]
     if bad:
         raise InvalidContextError(
-            f"context keys must be strings, got {bad[:5]!r}; valid keys: "
-            f"{sorted([*CONTEXT_TABLE, 'level', 'bot_team'])}"
+            f"context keys must be strings, got {bad[:5]!r}; valid keys: {_valid_keys()}"
         )
     values: dict[str, float] = {}
     level, bot_team = DEFAULT_LEVEL, "none"
@@ -162,8 +166,7 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
             continue
         spec = CONTEXT_TABLE.get(key)
         if spec is None:
-            valid = sorted([*CONTEXT_TABLE, "level", "bot_team"])
-            raise InvalidContextError(f"unknown context key {key!r}; valid keys: {valid}")
+            raise InvalidContextError(f"unknown context key {key!r}; valid keys: {_valid_keys()}")
         values[key] = _check_value(key, value, spec)
     blue = {k.chassis_field: values.get(k.name, k.default) for k in DYNAMICS_KEYS}
     red = {k.chassis_field: values.get(OPPONENT_PREFIX + k.name, k.default) for k in DYNAMICS_KEYS}

@@ -80,10 +80,12 @@ HOSTILE: dict[str, tuple[bytes, type[Exception]]] = {
 @pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
 def test_hostile_payload_is_refused_quickly(case: str, capsys: pytest.CaptureFixture) -> None:
     payload, error = HOSTILE[case]
-    t0 = time.thread_time()
-    with pytest.raises(error):
-        decode_request(payload)
-    assert time.thread_time() - t0 < QUICK_S
+
+    def refuse() -> None:
+        with pytest.raises(error):
+            decode_request(payload)
+
+    assert _cpu(refuse) < QUICK_S  # the best of a few tries: a loaded machine adds noise
     assert "unpickled" not in capsys.readouterr().out
 
 
