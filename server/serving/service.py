@@ -21,6 +21,8 @@ rules below can be tested without a network:
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import logging
 import time
 import uuid
@@ -61,6 +63,7 @@ from neuronsmae.protocol.messages import (
     decode_request,
     encode_reply,
 )
+from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.vec import VecArena
 
 log = logging.getLogger("neuronsmae.server")
@@ -106,6 +109,7 @@ class _Built:
     vec: VecArena
     seed: int
     options_key: bytes
+    options: dict[str, Any]
     session: str | None = None
     used: bool = False
 
@@ -300,11 +304,30 @@ class ArenaService:
         }
 
     def _build(self, seed: int, options: dict[str, Any]) -> None:
-        """Build the new arenas first, so a refused option leaves the old ones serving."""
-        vec = VecArena(seed, self.arenas, factory=self._factory, **options)
-        old, self._built = self._built, _Built(vec, seed, _options_key(options))
+        """Replace the arenas, holding one set in memory at a time.
+
+        The options are checked first, so a refused option leaves the old arenas serving
+        their episodes. The old arenas are then freed before the new ones are built: built
+        beside them, a K-arena server would hold both sets at once, and the C allocator
+        keeps such a peak (a K = 8 server stayed 300 MB larger after one rebuild). Should the
+        build fail even so, the old arenas are built again from their seed and options (their
+        episodes are lost) and the error is raised.
+        """
+        ArenaConfig.from_options(options)
+        old, self._built = self._built, None
+        previous = None if old is None else (old.seed, old.options_key, old.options)
         if old is not None:
             old.vec.close()
+            del old
+            _release_memory()
+        try:
+            vec = VecArena(seed, self.arenas, factory=self._factory, **options)
+        except BaseException:
+            if previous is not None:
+                again = VecArena(previous[0], self.arenas, factory=self._factory, **previous[2])
+                self._built = _Built(again, *previous)
+            raise
+        self._built = _Built(vec, seed, _options_key(options), dict(options))
         period = 0.0
         if self._time_scale > 0:
             steps = vec.get_env_info().get("decision_steps", 1)
@@ -374,3 +397,14 @@ class ArenaService:
     def _close(self, body: Close, session: str) -> None:
         if self._owner == session:
             self._owner = None
+
+
+def _release_memory() -> None:
+    """Collect cycles and hand freed heap pages back to the system (glibc's
+    ``malloc_trim``; elsewhere only the collection)."""
+    gc.collect()
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (AttributeError, OSError):
+        return
+    trim(0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import ClassVar
 
 import msgpack
 import numpy as np
@@ -22,6 +23,7 @@ from neuronsmae.protocol.messages import (
     Reply,
     Reset,
     Step,
+    VReset,
     decode_reply,
     encode_request,
 )
@@ -146,3 +148,41 @@ def test_pacer_holds_the_rate() -> None:
     assert slept == pytest.approx([0.3, 0.5])
     Pacer(0.0, sleep=slept.append).wait()  # unlimited: returns at once
     assert len(slept) == 2
+
+
+class LoggedArena(Arena):
+    """An ``Arena`` that logs its construction and close; seed 666 fails to build."""
+
+    events: ClassVar[list[tuple[str, int]]] = []
+
+    def __init__(self, seed: int = 1234, **options: object) -> None:
+        if seed == 666:
+            raise RuntimeError("this arena cannot be built")
+        super().__init__(seed, **options)
+        LoggedArena.events.append(("built", seed))
+
+    def close(self) -> None:
+        LoggedArena.events.append(("closed", self.seed))
+        super().close()
+
+
+def test_a_rebuild_frees_the_old_arenas_before_building_and_survives_a_failed_build() -> None:
+    events = LoggedArena.events
+    events.clear()
+    with ArenaService(LoggedArena, seed=5, arenas=2, clock=Clock()) as svc:  # type: ignore[arg-type]
+        events.clear()  # the warm-up's and the first build's
+        value(svc, Configure(seed=10, arenas=2), "f")
+        # Both old arenas closed before the first new one exists: one set in memory at a time.
+        assert events == [("closed", 5), ("closed", 6), ("built", 10), ("built", 11)]
+        value(svc, VReset(), "f")
+        events.clear()
+        assert code(svc, Configure(seed=7, arenas=2, options={"warp": 9}), "f") == "invalid_option"
+        assert events == []  # a refused option frees nothing: the episode goes on
+        events.clear()
+        assert code(svc, Configure(seed=666, arenas=2), "f") == "server_error"
+        # The failed build left the old seed's arenas, built again, serving.
+        assert events == [("closed", 10), ("closed", 11), ("built", 10), ("built", 11)]
+        value(svc, Configure(seed=10, arenas=2), "f")
+        first = value(svc, VReset(), "f")
+    expected = np.stack([Arena(seed=10).reset(), Arena(seed=11).reset()])
+    assert np.array_equal(first["obs"], expected)  # type: ignore[index]
