@@ -226,8 +226,9 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
     lines.append("")
     lines.append(
         f"Paper preset: {len(done)} of {len(ALGS) * len(LEVELS) * seeds} runs recorded, "
-        f"{sum(r['episodes'] for r in done):,} training episodes, {hours:.1f} h of wall "
-        "time (training and tests)."
+        f"{sum(r['episodes'] for r in done):,} training episodes "
+        f"({sum(r['env_steps'] for r in done) / 1e6:.1f} million decisions), {hours:.1f} h "
+        "of wall time (training and tests)."
     )
     return "\n".join(lines)
 

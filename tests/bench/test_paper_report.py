@@ -15,7 +15,7 @@ def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper"
     if learner == "paper":
         test["coef=1.5"] = {"win_rate": rate / 2}
     return {"alg": alg, "level": level, "seed": seed, "learner": learner, "test": test,
-            "episodes": 30_000, "wall_minutes": 30.0}  # fmt: skip
+            "episodes": 30_000, "env_steps": 1_480_000, "wall_minutes": 30.0}  # fmt: skip
 
 
 def test_interval_is_the_student_t_half_width_over_seeds() -> None:
@@ -40,4 +40,5 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     assert "0.250 (s2 0.250; 1 of 3 seeds)" in rows[("hard", "IQL")]
     assert rows[("middle", "QMIX")].count("—") == 3
     assert lines[-1].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
+    assert "(5.9 million decisions)" in lines[-1]
     assert "2.0 h of wall time" in lines[-1]
