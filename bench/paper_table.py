@@ -2,6 +2,7 @@
 
     python -m bench.paper_table [--learner paper|defaults] [--seeds 1 2 3]
                                 [--runs runs/table] [--out docs/data/paper_table.json]
+                                [--report | --test-at KEY=VALUE;...]
 
 ``--learner paper`` (the default) trains every cell with ``--preset paper``: the paper's
 learner, hyper-parameters, loop and contexts at its budget of 30,000 episodes, then tests
@@ -24,7 +25,10 @@ default here: the same episodes as served arenas, without a server process compe
 the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key (tests use it
 for tiny runs). Prints the table so far at the end (``--report``: only that, as Markdown
 for docs/results.md: mean ± 95 % Student-t interval over seeds, each seed's figure, and
-the compute the recorded runs took).
+the compute the recorded runs took). ``--test-at "coef=0.5"`` tests the recorded runs'
+final weights again with their test contexts so updated, on the same starts (their
+checkpoints must still be in ``--runs``), stores the results in the records and stops; the
+report then adds a table of them.
 """
 
 from __future__ import annotations
@@ -47,11 +51,16 @@ from scipy import stats
 
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
+from neuronsmae.trainers.contexts import ContextSpec
+from neuronsmae.trainers.evaluate import evaluate_checkpoint
 from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
-from neuronsmae.trainers.train import train
+from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
 
 ALGS = ("iql", "vdn", "qmix")
 LEVELS = ("easy", "middle", "hard")
+TEST_FIELDS = ("win_rate", "draw_rate", "loss_rate", "mean_return")
+"""What a record keeps of each test, beside its episode count."""
+
 DEFAULTS_TESTS = {"eval.extra_test_contexts": "coef=1.5"}
 """The project's learner is tested at coef 1.5 too, beside the paper preset's runs."""
 
@@ -123,8 +132,7 @@ def record(
         "updates": counters["updates"],
         "wall_minutes": round(counters["wall_seconds"] / 60, 2),
         "test": {
-            name: {k: row[k] for k in ("win_rate", "draw_rate", "loss_rate", "mean_return")}
-            | {"episodes": row["eval_episodes"]}
+            name: {k: row[k] for k in TEST_FIELDS} | {"episodes": row["eval_episodes"]}
             for name, row in tests.items()
         },
         "run_dir": result["run_dir"],
@@ -171,6 +179,52 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
         keep_logs(run_dir, args.out, args.learner).relative_to(args.out.parent).as_posix()
     )
     return line
+
+
+def test_at(args: argparse.Namespace, extra: str) -> int:
+    """Test every recorded run's final weights again with its test contexts updated by
+    ``extra`` (e.g. ``coef=0.5``, the paper preset's training context), on the same test
+    starts and as many episodes; stored in the record's ``test`` under ``extra``.
+
+    Needs each run's checkpoint (the record's ``run_dir``, else ``--runs``), and refuses
+    one whose episode count is not the record's: that would not be the final weights.
+    Returns how many records were added to.
+    """
+    more = ContextSpec.parse(extra)
+    more.value()  # fixed values only
+    added = 0
+    for rec in load(args.out)["records"]:
+        if rec["learner"] != args.learner or extra in rec["test"]:
+            continue
+        run_dir = Path(rec["run_dir"])
+        if not (run_dir / CHECKPOINT_NAME).is_file():
+            run_dir = args.runs / rec["learner"] / f"{rec['alg']}_{rec['level']}_s{rec['seed']}"
+        if not (run_dir / CHECKPOINT_NAME).is_file():
+            print(f"no checkpoint for {rec['alg']}/{rec['level']}/s{rec['seed']}: skipped")
+            continue
+        saved = load_checkpoint(run_dir)
+        if saved["counters"]["episodes"] != rec["episodes"]:
+            raise ValueError(
+                f"{run_dir / CHECKPOINT_NAME} holds {saved['counters']['episodes']} episodes, "
+                f"the record {rec['episodes']}: not the recorded final weights"
+            )
+        spec = saved["config"]["eval"]
+        contexts = ContextSpec.parse(spec["eval_contexts"]).updated(more).value()
+        row = evaluate_checkpoint(
+            run_dir / CHECKPOINT_NAME, rec["level"], rec["test"]["main"]["episodes"],
+            spec["eval_seed"] + TEST_SEED_OFFSET, contexts=contexts,
+        )  # fmt: skip
+        table = load(args.out)  # the table's own runner may have added records meanwhile
+        key = (rec["alg"], rec["level"], rec["seed"], rec["learner"])
+        for line in table["records"]:
+            if (line["alg"], line["level"], line["seed"], line["learner"]) == key:
+                line["test"][extra] = {k: row[k] for k in TEST_FIELDS} | {
+                    "episodes": row["eval_episodes"]
+                }
+        save(args.out, table)
+        added += 1
+        print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {contexts}: {row['win_rate']:.3f}")
+    return added
 
 
 def interval(rates: Sequence[float]) -> tuple[float, float | None]:
@@ -230,7 +284,24 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
         f"({sum(r['env_steps'] for r in done) / 1e6:.1f} million decisions), {hours:.1f} h "
         "of wall time (training and tests)."
     )
-    return "\n".join(lines)
+    return "\n".join(lines + _retests(done))
+
+
+def _retests(done: list[dict[str, Any]]) -> list[str]:
+    """A second table for the tests added by ``--test-at`` (none: no lines)."""
+    extra = sorted({k for r in done for k in r["test"]} - {"main", "coef=1.5"})
+    if not extra:
+        return []
+    head = " | ".join(f"`--preset paper`, {k}" for k in extra)
+    lines = ["", f"| level | alg | `--preset paper`, coef 1.0 | {head} |"]
+    lines.append("|---|---|---|" + "---|" * len(extra))
+    for level in LEVELS:
+        for alg in ALGS:
+            runs = _runs(done, alg, level, "paper")
+            n = max(len(runs), 1)
+            cells = " | ".join([cell(runs, k, n) for k in ("main", *extra)])
+            lines.append(f"| {level} | {alg.upper()} | {cells} |")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -248,7 +319,16 @@ def main(argv: list[str] | None = None) -> int:
         "--set", action="append", default=[], metavar="KEY=VALUE", help="config override"
     )
     p.add_argument("--report", action="store_true", help="print the table of --out and stop")
+    p.add_argument(
+        "--test-at",
+        metavar="KEY=VALUE;...",
+        help="test the recorded runs' final weights again with these contexts over their "
+        "test contexts (e.g. coef=0.5, the training context), store the results and stop",
+    )
     args = p.parse_args(argv)
+    if args.test_at:
+        print(f"{test_at(args, args.test_at)} record(s) tested at {args.test_at}")
+        return 0
     if args.report:
         print(report(load(args.out), len(args.seeds)))
         return 0

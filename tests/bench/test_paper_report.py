@@ -42,3 +42,15 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     assert lines[-1].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
     assert "(5.9 million decisions)" in lines[-1]
     assert "2.0 h of wall time" in lines[-1]
+
+
+def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
+    records = [_record("vdn", "easy", s, r) for s, r in ((1, 0.3), (2, 0.4))]
+    assert "coef=0.5" not in report({"records": records})
+    records[0]["test"]["coef=0.5"] = {"win_rate": 1.0}
+    lines = report({"records": records}).splitlines()
+    assert "| level | alg | `--preset paper`, coef 1.0 | `--preset paper`, coef=0.5 |" in lines
+    row = next(line for line in lines[-10:] if line.startswith("| easy | VDN"))
+    assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.0
+    assert row.split("|")[4].strip() == "1.000 (s1 1.000; 1 of 2 seeds)"  # s2 not yet
+    assert lines[-1].startswith("| hard | QMIX | — | — |")

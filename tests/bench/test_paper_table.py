@@ -52,3 +52,11 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     assert main(args) == 0  # already recorded: skipped, nothing added
     assert len(json.loads(out.read_text())["records"]) == 1
     assert "| hard | QMIX | 0.34 | 0." in capsys.readouterr().out  # the table, the run in it
+    # Tested again at its own test contexts: the same starts and weights, the same figures.
+    assert main([*args, "--test-at", "coef=1.0"]) == 0
+    assert main([*args, "--test-at", "coef=1.0"]) == 0  # already there: not tested again
+    assert "0 record(s) tested" in capsys.readouterr().out
+    (line,) = json.loads(out.read_text())["records"]
+    assert line["test"]["coef=1.0"] == line["test"]["main"]
+    assert main([*args, "--report"]) == 0
+    assert "| `--preset paper`, coef 1.0 | `--preset paper`, coef=1.0 |" in capsys.readouterr().out
