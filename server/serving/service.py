@@ -405,6 +405,6 @@ def _release_memory() -> None:
     gc.collect()
     try:
         trim = ctypes.CDLL(None).malloc_trim
-    except (AttributeError, OSError):
+    except (AttributeError, OSError, TypeError):  # no glibc; Windows refuses CDLL(None)
         return
     trim(0)
