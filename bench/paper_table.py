@@ -115,6 +115,11 @@ def save(path: Path, table: dict[str, Any]) -> None:
     tmp.replace(path)
 
 
+def _figures(row: dict[str, Any]) -> dict[str, Any]:
+    """What a record keeps of one evaluation row: :data:`TEST_FIELDS` and the episodes."""
+    return {k: row[k] for k in TEST_FIELDS} | {"episodes": row["eval_episodes"]}
+
+
 def record(
     args: argparse.Namespace, alg: str, level: str, seed: int, result: dict[str, Any]
 ) -> dict[str, Any]:
@@ -131,10 +136,7 @@ def record(
         "env_steps": counters["env_steps"],
         "updates": counters["updates"],
         "wall_minutes": round(counters["wall_seconds"] / 60, 2),
-        "test": {
-            name: {k: row[k] for k in TEST_FIELDS} | {"episodes": row["eval_episodes"]}
-            for name, row in tests.items()
-        },
+        "test": {name: _figures(row) for name, row in tests.items()},
         "run_dir": result["run_dir"],
         "commit": commit(),
         "machine": {
@@ -218,9 +220,7 @@ def test_at(args: argparse.Namespace, extra: str) -> int:
         key = (rec["alg"], rec["level"], rec["seed"], rec["learner"])
         for line in table["records"]:
             if (line["alg"], line["level"], line["seed"], line["learner"]) == key:
-                line["test"][extra] = {k: row[k] for k in TEST_FIELDS} | {
-                    "episodes": row["eval_episodes"]
-                }
+                line["test"][extra] = _figures(row)
         save(args.out, table)
         added += 1
         print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {contexts}: {row['win_rate']:.3f}")

@@ -56,15 +56,20 @@ def resources(proc: psutil.Process) -> dict[str, int]:
     }
 
 
+def _client(port: int, envs: int, seed: int, **options: Any) -> Any:
+    """The client for a server of ``envs`` arenas on ``port``: ``RM`` for one, else ``VecRM``
+    (which plays the discrete default: ``options`` go to ``RM`` only)."""
+    if envs > 1:
+        return VecRM(seed=seed, port=port, num_envs=envs, launch=False, timeout=10.0)
+    return RM(seed=seed, port=port, launch=False, timeout=10.0, **options)
+
+
 class _Player:
     """Random allowed actions for one client; ``step`` returns the decisions it made."""
 
     def __init__(self, port: int, envs: int, action_space: str) -> None:
         self.vector = envs > 1
-        if self.vector:
-            self.env: Any = VecRM(seed=1, port=port, num_envs=envs, launch=False, timeout=10.0)
-        else:
-            self.env = RM(seed=1, port=port, launch=False, timeout=10.0, action_space=action_space)
+        self.env = _client(port, envs, 1, action_space=action_space)
         self.continuous = action_space == "continuous"
         self.rng = np.random.default_rng(0)
         self.episodes = 0
@@ -149,11 +154,7 @@ def rebuild_rss(envs: int, count: int) -> list[float]:
     proc, out = psutil.Process(server.proc.pid), []
     try:
         for i in range(count + 1):
-            env: Any = (
-                VecRM(seed=1 + 100 * (i % 2), port=port, num_envs=envs, launch=False)
-                if envs > 1
-                else RM(seed=1 + 100 * (i % 2), port=port, launch=False)
-            )
+            env = _client(port, envs, 1 + 100 * (i % 2))
             try:
                 env.reset()
                 out.append(proc.memory_info().rss / 2**20)

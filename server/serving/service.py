@@ -108,7 +108,6 @@ class _Built:
 
     vec: VecArena
     seed: int
-    options_key: bytes
     options: dict[str, Any]
     session: str | None = None
     used: bool = False
@@ -288,7 +287,7 @@ class ArenaService:
         built = self._built
         rebuilt = (
             built is None
-            or (built.seed, built.options_key) != (seed, key)
+            or (built.seed, _options_key(built.options)) != (seed, key)
             or (built.used and built.session != session)
         )
         if rebuilt:
@@ -315,7 +314,7 @@ class ArenaService:
         """
         ArenaConfig.from_options(options)
         old, self._built = self._built, None
-        previous = None if old is None else (old.seed, old.options_key, old.options)
+        previous = None if old is None else (old.seed, old.options)
         if old is not None:
             old.vec.close()
             del old
@@ -324,10 +323,11 @@ class ArenaService:
             vec = VecArena(seed, self.arenas, factory=self._factory, **options)
         except BaseException:
             if previous is not None:
-                again = VecArena(previous[0], self.arenas, factory=self._factory, **previous[2])
-                self._built = _Built(again, *previous)
+                seed_was, options_were = previous
+                again = VecArena(seed_was, self.arenas, factory=self._factory, **options_were)
+                self._built = _Built(again, seed_was, options_were)
             raise
-        self._built = _Built(vec, seed, _options_key(options), dict(options))
+        self._built = _Built(vec, seed, dict(options))
         period = 0.0
         if self._time_scale > 0:
             steps = vec.get_env_info().get("decision_steps", 1)
