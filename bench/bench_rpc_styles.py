@@ -17,20 +17,18 @@ Prints a Markdown table and writes ``bench/out/rpc_styles.json``.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import psutil
 import zenoh
 
 from bench.bench_transport import play
-from bench.common import free_port, machine, table, write_json
+from bench.common import cpu_by_thread, cpu_snapshot, free_port, machine, table, write_json
 from neuronsmae.protocol.messages import (
     Configure,
     OkReply,
@@ -112,22 +110,6 @@ def remote_round(client: StyleClient, decisions: int, rng: np.random.Generator) 
     return decisions / (time.perf_counter() - start)
 
 
-def thread_cpu(pid: int) -> dict[str, float]:
-    """CPU seconds so far of each thread name of ``pid`` (Linux ``/proc``)."""
-    out: dict[str, float] = {}
-    tick = os.sysconf("SC_CLK_TCK")
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        try:
-            stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
-        except FileNotFoundError:  # the thread ended meanwhile
-            continue
-        name = stat[stat.index("(") + 1 : stat.rindex(")")]
-        fields = stat[stat.rindex(")") + 2 :].split()
-        kind = "main (Python)" if name.startswith("python") else "Zenoh threads"
-        out[kind] = out.get(kind, 0.0) + (int(fields[11]) + int(fields[12])) / tick
-    return out
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--decisions", type=int, default=200)
@@ -157,13 +139,14 @@ def main() -> None:
             rng = np.random.default_rng(r)
             rates["in_process"].append(play(arena, args.decisions, rng, False, [me])[0])
             for style in STYLES:
-                before = thread_cpu(servers[style].pid)
+                server = psutil.Process(servers[style].pid)
+                before = cpu_snapshot([server])
                 rng = np.random.default_rng(r)
                 rates[style].append(remote_round(clients[style], args.decisions, rng))
-                after = thread_cpu(servers[style].pid)
-                for kind, seconds in after.items():
-                    spent = (seconds - before.get(kind, 0.0)) / args.decisions
-                    cpu[style][kind] = cpu[style].get(kind, 0.0) + spent / args.rounds
+                split = cpu_by_thread(before, cpu_snapshot([server]), [server.pid])[0]
+                for kind, seconds in zip(("main (Python)", "Zenoh threads"), split, strict=True):
+                    spent = seconds / args.decisions / args.rounds
+                    cpu[style][kind] = cpu[style].get(kind, 0.0) + spent
     finally:
         for client in clients.values():
             client.close()

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import machine, table, write_json
+from bench.common import machine, process_cpu_seconds, table, write_json
 from neuronsmae.client import VecRM
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec
 
@@ -73,10 +73,6 @@ def drive(port: int, envs: int, seed: int, seconds: float, barrier: Barrier, out
         env.close()
 
 
-def cpu_seconds(procs: list[psutil.Process]) -> float:
-    return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
-
-
 def one_round(ports: list[int], envs: int, seconds: float, seed: int) -> dict[str, Any]:
     """All clients at once, started together; aggregate rate and CPU per decision."""
     ctx = mp.get_context("spawn")  # never fork: this process and the clients use Zenoh
@@ -91,9 +87,9 @@ def one_round(ports: list[int], envs: int, seconds: float, seed: int) -> dict[st
         client.start()
     servers = [p for p in psutil.Process().children() if _serves(p, ports)]
     barrier.wait(timeout=300)
-    load, server_cpu = os.getloadavg()[0], cpu_seconds(servers)
+    load, server_cpu = os.getloadavg()[0], process_cpu_seconds(servers)
     results = [out.get(timeout=seconds + 120) for _ in clients]
-    server_cpu = cpu_seconds(servers) - server_cpu
+    server_cpu = process_cpu_seconds(servers) - server_cpu
     for client in clients:
         client.join(30)
     decisions = sum(r["decisions"] for r in results)

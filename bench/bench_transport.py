@@ -36,7 +36,15 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import free_port, machine, table, write_json
+from bench.common import (
+    cpu_between,
+    cpu_by_thread,
+    cpu_snapshot,
+    free_port,
+    machine,
+    table,
+    write_json,
+)
 from bench.zenoh_floor import measure as measure_floor
 from neuronsmae.client import RM
 from neuronsmae.protocol.interface import ArenaAPI
@@ -51,24 +59,6 @@ CONFIGS: dict[str, dict[str, Any]] = {
 TARGET = 0.85
 
 
-def cpu_seconds(procs: list[psutil.Process]) -> float:
-    """User + system CPU time used so far by ``procs`` (all their threads)."""
-    return sum(p.cpu_times().user + p.cpu_times().system for p in procs)
-
-
-def thread_cpu(proc: psutil.Process) -> tuple[float, float]:
-    """CPU seconds so far of ``proc``'s main thread and of all its other threads (Zenoh's
-    runtime, Ray's, numba's): the split says whether a cost is the arena's or the
-    transport's."""
-    main = other = 0.0
-    for t in proc.threads():
-        if t.id == proc.pid:
-            main += t.user_time + t.system_time
-        else:
-            other += t.user_time + t.system_time
-    return main, other
-
-
 def play(
     env: ArenaAPI,
     decisions: int,
@@ -79,7 +69,7 @@ def play(
     """Decisions per wall-clock second and per CPU second (of ``procs``) of a trainer-like
     loop on ``env``."""
     env.reset()
-    wall, cpu = time.perf_counter(), cpu_seconds(procs)
+    wall, cpu = time.perf_counter(), cpu_snapshot(procs)
     for _ in range(decisions):
         actions: list[Any] = []
         for mask in env.get_avail_actions():
@@ -87,8 +77,8 @@ def play(
             actions.append([*rng.uniform(-1.5, 1.5, 3).tolist(), choice] if continuous else choice)
         if env.step(actions)[2]:
             env.reset()
-    wall, cpu = time.perf_counter() - wall, cpu_seconds(procs) - cpu
-    return decisions / wall, decisions / max(cpu, 1e-9)
+    wall, used = time.perf_counter() - wall, cpu_between(cpu, cpu_snapshot(procs))
+    return decisions / wall, decisions / max(used, 1e-9)
 
 
 def launched_server(port: int) -> psutil.Process:
@@ -125,9 +115,9 @@ def compare(
             for k, (path, env, procs) in enumerate(
                 (("in_process", local, me), ("zenoh", remote, both))
             ):
-                before = np.array([thread_cpu(p) for p in both])
+                before = cpu_snapshot(both)
                 runs[path].append(play(env, decisions, np.random.default_rng(r), continuous, procs))
-                threads[k] += np.array([thread_cpu(p) for p in both]) - before
+                threads[k] += cpu_by_thread(before, cpu_snapshot(both), [p.pid for p in both])
     finally:
         remote.close()
         local.close()

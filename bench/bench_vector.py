@@ -9,7 +9,8 @@ draw), ``step``; arenas autoreset. Rounds alternate between the two (and between
 so load from other processes hits them alike. Reported per K, as medians over rounds:
 
 * CPU µs per decision (one decision = one arena advancing once): for the served path the
-  client process and the server process together, all their threads; the ratio
+  client process and the server process together, all their threads, each read to the
+  nanosecond from the scheduler (``bench.common.cpu_snapshot``); the ratio
   in-process / served of those (**target ≥ 0.9 at K = 8**), and the ratio of decisions per
   second. Both ratios are medians of per-round ratios: a round plays the in-process and
   the served arenas back to back from the same state with the same actions (the same
@@ -34,8 +35,8 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.bench_transport import compare, cpu_seconds, thread_cpu
-from bench.common import machine, table, write_json
+from bench.bench_transport import compare
+from bench.common import cpu_between, cpu_by_thread, cpu_snapshot, machine, table, write_json
 from neuronsmae.client.vec_rm import VecRM
 from neuronsmae.protocol.interface import VecArenaAPI
 from neuronsmae.server.vec import VecArena
@@ -59,13 +60,12 @@ def measure(
 ) -> tuple[float, float, np.ndarray]:
     """Decisions per second, CPU µs per decision of ``procs``, and per-thread CPU µs per
     decision ``[process][main, other]`` of one round."""
-    before = np.array([thread_cpu(p) for p in procs])
-    cpu, wall = cpu_seconds(procs), time.perf_counter()
+    before, wall = cpu_snapshot(procs), time.perf_counter()
     play(env, steps, np.random.default_rng(seed))
-    wall, cpu = time.perf_counter() - wall, cpu_seconds(procs) - cpu
+    wall, after = time.perf_counter() - wall, cpu_snapshot(procs)
     decisions = steps * env.num_envs
-    threads = np.array([thread_cpu(p) for p in procs]) - before
-    return decisions / wall, cpu / decisions * 1e6, threads / decisions * 1e6
+    threads = np.array(cpu_by_thread(before, after, [p.pid for p in procs]))
+    return decisions / wall, cpu_between(before, after) / decisions * 1e6, threads / decisions * 1e6
 
 
 def rss_mb(proc: psutil.Process) -> float:

@@ -36,8 +36,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.bench_transport import cpu_seconds
-from bench.common import machine, table, write_json
+from bench.common import machine, process_cpu_seconds, table, write_json
 from neuronsmae.client import RM, VecRM
 from tests.client.conftest import Server, free_port
 
@@ -120,7 +119,7 @@ def soak(
             if not base and done_k >= warmup:
                 base = {"server": resources(server_ps), "client": resources(client_ps)}
             if done_k >= warmup and (done_k - warmup) // window >= len(cpu_marks):
-                cpu_marks.append((done_k, cpu_seconds([server_ps, client_ps])))
+                cpu_marks.append((done_k, process_cpu_seconds([server_ps, client_ps])))
             if done_k // 1000 >= len(rss_series):
                 rss_series.append((done_k, server_ps.memory_info().rss))
             chosen = player.actions()
@@ -129,7 +128,7 @@ def soak(
             latency.append((done_k, time.perf_counter() - t0))
             done_k += made
         wall = time.perf_counter() - t_start
-        cpu_marks.append((done_k, cpu_seconds([server_ps, client_ps])))
+        cpu_marks.append((done_k, process_cpu_seconds([server_ps, client_ps])))
         end = {"server": resources(server_ps), "client": resources(client_ps)}
     finally:
         player.env.close()
