@@ -13,7 +13,12 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import psutil
+
+from neuronsmae.client import ping
+from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.protocol.launch import ServerCommand, ServerProcess
 
 OUT = Path(__file__).resolve().parent / "out"
 
@@ -123,3 +128,37 @@ def cpu_by_thread(before: CpuSnapshot, after: CpuSnapshot, pids: list[int]) -> l
     """``[[main, other], ...]`` CPU seconds per process of ``pids``, from ``before`` to
     ``after``: the split says whether a cost is the arena's or the transport's."""
     return [[cpu_between(before, after, flag, pid) for flag in (True, False)] for pid in pids]
+
+
+def start_server(port: int, *, arenas: int = 1, seed: int = 1234) -> ServerProcess:
+    """An unpaced ``neuronsmae-server`` holding ``arenas`` arenas on ``port``, started as a
+    client launches one (it exits with this process), ready when returned."""
+
+    def answers() -> bool:
+        try:
+            ping(port, timeout=1.0)
+        except ServerUnavailableError:
+            return False
+        return True
+
+    server = ServerProcess(ServerCommand(port, seed, arenas=arenas, time_scale=0.0))
+    server.wait_ready(answers)
+    return server
+
+
+def same(a: Any, b: Any) -> bool:
+    """Bit-for-bit equality of nested results (dtype, shape, bytes; -0.0 ≠ 0.0)."""
+    if isinstance(a, (np.ndarray, np.generic)):
+        return (
+            type(a) is type(b)
+            and a.dtype == b.dtype
+            and a.shape == b.shape
+            and a.tobytes() == b.tobytes()
+        )
+    if isinstance(a, (list, tuple)):
+        return isinstance(b, (list, tuple)) and len(a) == len(b) and all(map(same, a, b))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, float):
+        return type(b) is float and np.float64(a).tobytes() == np.float64(b).tobytes()
+    return type(a) is type(b) and a == b

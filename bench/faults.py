@@ -40,11 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.common import machine, table, write_json
+from bench.common import free_port, machine, same, table, write_json
 from neuronsmae.client import RM
 from neuronsmae.protocol.errors import ResetNeededError, ServerUnavailableError
 from neuronsmae.server.arena import Arena
-from tests.client.conftest import free_port, same
 
 TIMEOUT = 5.0
 PATIENCE = 120.0

@@ -37,7 +37,7 @@ import msgpack
 import numpy as np
 import zenoh
 
-from bench.common import machine, table, write_json
+from bench.common import free_port, machine, same, start_server, table, write_json
 from neuronsmae.client import RM, VecRM
 from neuronsmae.protocol.errors import ERRORS, NeuronsMAEError, ServerError
 from neuronsmae.protocol.messages import (
@@ -54,7 +54,6 @@ from neuronsmae.protocol.messages import (
 )
 from neuronsmae.protocol.transport import client_config
 from neuronsmae.server import Arena, VecArena
-from tests.client.conftest import Server, free_port, same
 
 KNOWN_CODES = frozenset({*ERRORS, NOT_CONFIGURED})
 OPTIONS: dict[str, Any] = {"action_space": "discrete"}
@@ -397,7 +396,7 @@ def fresh_episode_matches(port: int, seed: int = 12, decisions: int = 40, arenas
 def campaign(arenas: int, count: int, seed: int, timeout: float) -> dict[str, Any]:
     """Both phases and the fresh-episode check against one server holding ``arenas``."""
     port = free_port()
-    server = Server(port, "--time-scale", "0", "--arenas", str(arenas)).wait_ready()
+    server = start_server(port, arenas=arenas)
     raw = Raw(port)
     try:
         open_phase = fire(raw, payloads(seed, count, arenas=arenas), timeout)

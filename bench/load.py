@@ -31,7 +31,7 @@ import numpy as np
 import zenoh
 
 from bench.bench_scaling import measure
-from bench.common import machine, table, write_json
+from bench.common import free_port, machine, start_server, table, write_json
 from neuronsmae.client import RM
 from neuronsmae.protocol.codec import encode
 from neuronsmae.protocol.errors import BusyError
@@ -51,7 +51,6 @@ from neuronsmae.protocol.messages import (
 )
 from neuronsmae.protocol.transport import client_config
 from neuronsmae.server.arena import Arena
-from tests.client.conftest import Server, free_port
 
 SEED = 5
 OPTIONS: dict[str, Any] = {"action_space": "discrete"}
@@ -132,7 +131,7 @@ def contender(i: int, port: int, decisions: int, barrier: Barrier, stop: Event, 
 
 def contention(clients: int, decisions: int) -> dict[str, Any]:
     port = free_port()
-    server = Server(port, "--time-scale", "0").wait_ready()
+    server = start_server(port)
     try:
         with RM(seed=SEED, port=port, launch=False, timeout=30.0, **OPTIONS) as alone_env:
             alone = play(alone_env, decisions)
@@ -199,6 +198,7 @@ def main() -> int:
     parser.add_argument("--clients", type=int, default=8)
     parser.add_argument("--decisions", type=int, default=2000)
     parser.add_argument("--counts", type=int, nargs="*", default=[1, 2, 4, 8])
+    parser.add_argument("--envs", type=int, default=1, help="arenas per server in part 2")
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--base-port", type=int, default=18100)
@@ -214,7 +214,9 @@ def main() -> int:
                 ["run", "p50", "p99", "mean", "decisions_per_s"]))  # fmt: skip
     scaling = []
     if args.counts:
-        scaling = measure(sorted(args.counts), args.seconds, args.repeats, args.base_port)
+        scaling = measure(
+            sorted(args.counts), args.envs, args.seconds, args.repeats, args.base_port
+        )
         columns = ["servers", "decisions_per_s", "per_server", "cpu_ms_per_decision", "load1"]
         print(table(scaling, columns))
     ok = (

@@ -36,9 +36,8 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import machine, process_cpu_seconds, table, write_json
+from bench.common import free_port, machine, process_cpu_seconds, start_server, table, write_json
 from neuronsmae.client import RM, VecRM
-from tests.client.conftest import Server, free_port
 
 RSS_GROWTH_LIMIT = 0.05
 P99_FACTOR = 2.0
@@ -104,8 +103,7 @@ def soak(
     """Play ``decisions`` decisions; latency per request, resources at the warm-up and the
     end, server RSS every 1000 decisions and CPU seconds at every window boundary."""
     port = free_port()
-    args = ["--time-scale", "0", "--arenas", str(envs)]
-    server = Server(port, *args).wait_ready()
+    server = start_server(port, arenas=envs)
     server_ps, client_ps = psutil.Process(server.proc.pid), psutil.Process()
     latency: list[tuple[int, float]] = []  # (decisions before the request, seconds)
     rss_series: list[tuple[int, int]] = []
@@ -149,7 +147,7 @@ def soak(
 def rebuild_rss(envs: int, count: int) -> list[float]:
     """Server RSS (MiB) after the first configure and after each of ``count`` rebuilds."""
     port = free_port()
-    server = Server(port, "--time-scale", "0", "--arenas", str(envs), "--seed", "1").wait_ready()
+    server = start_server(port, arenas=envs, seed=1)
     proc, out = psutil.Process(server.proc.pid), []
     try:
         for i in range(count + 1):

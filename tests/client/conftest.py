@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -16,6 +15,8 @@ import numpy as np
 import pytest
 import zenoh
 
+from bench.common import free_port as free_port  # re-exported: the tests import both here
+from bench.common import same as same
 from neuronsmae.client import ping
 from neuronsmae.protocol.errors import ServerUnavailableError
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
@@ -24,13 +25,6 @@ from neuronsmae.server.arena import Arena
 from neuronsmae.server.serving.service import warm_up
 
 STARTUP_TIMEOUT = 120.0
-
-
-def free_port() -> int:
-    """A TCP port nothing listens on right now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Server:
@@ -106,24 +100,6 @@ class RawClient:
 
     def close(self) -> None:
         self.session.close()
-
-
-def same(a: Any, b: Any) -> bool:
-    """Bit-for-bit equality of nested results (dtype, shape, bytes; -0.0 ≠ 0.0)."""
-    if isinstance(a, (np.ndarray, np.generic)):
-        return (
-            type(a) is type(b)
-            and a.dtype == b.dtype
-            and a.shape == b.shape
-            and a.tobytes() == b.tobytes()
-        )
-    if isinstance(a, (list, tuple)):
-        return isinstance(b, (list, tuple)) and len(a) == len(b) and all(map(same, a, b))
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
-    if isinstance(a, float):
-        return type(b) is float and np.float64(a).tobytes() == np.float64(b).tobytes()
-    return type(a) is type(b) and a == b
 
 
 @pytest.fixture
