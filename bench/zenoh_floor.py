@@ -11,7 +11,14 @@ client cost nothing. The same exchange as a publication answered by a publicatio
 other request pattern), and over a plain TCP socket between two Python processes, shows how
 much of the floor is the pattern's, Zenoh's and the operating system's.
 
-Prints a Markdown table and writes bench/out/zenoh_floor.json.
+The vector path's floor (``--arenas K``, 8 by default): the CPU, all threads of both
+processes, of a bare query answered after the server has kept its core busy for as long as
+K in-process decisions take (measured first, in this run) with a reply as big as a K-arena
+``vstep`` reply. The client's core idles meanwhile, as it does while a vector server steps
+its arenas, and waking from that idle is what most of this floor pays for. Divided by K,
+it bounds ``bench_vector``'s CPU ratio: ``decision_us / (decision_us + floor_us / K)``.
+
+Prints Markdown tables and writes bench/out/zenoh_floor.json.
 """
 
 from __future__ import annotations
@@ -26,10 +33,13 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
+import numpy as np
+import psutil
 import zenoh
 
-from bench.common import free_port, machine, table, write_json
+from bench.common import cpu_by_thread, cpu_snapshot, free_port, machine, table, write_json
 from neuronsmae.protocol.transport import client_config, server_config
 from neuronsmae.server.serving.rpc import next_query
 
@@ -82,6 +92,27 @@ def serve_tcp(port: int) -> None:
 
 POLL_S = 2e-3
 """How long the polling echo server polls: as ``bench_transport``'s default busy poll."""
+HELD_REPLY_BYTES = 6_000
+"""A K = 8 ``vstep`` reply of the abstract 2 v 2 task: 5.9 KB."""
+
+
+def serve_held(port: int, hold_s: float, reply_bytes: int) -> None:
+    """Answer each query on ``KEY`` with ``reply_bytes`` bytes after ``hold_s`` seconds of
+    spinning (the core busy, as a vector server's is with its arenas), until killed."""
+    session = zenoh.open(server_config("127.0.0.1", port))
+    payload = b"x" * reply_bytes
+    try:
+        queryable = session.declare_queryable(KEY)
+        while True:
+            with queryable.recv() as query:
+                end = time.perf_counter() + hold_s
+                while time.perf_counter() < end:
+                    pass
+                query.reply(KEY, payload, express=True)
+    finally:
+        session.close()
+
+
 SERVERS: dict[str, Callable[[int], None]] = {
     "zenoh": serve_zenoh,
     "zenoh-poll": lambda port: serve_zenoh(port, POLL_S),
@@ -91,9 +122,10 @@ SERVERS: dict[str, Callable[[int], None]] = {
 
 
 @contextlib.contextmanager
-def spawned(kind: str, port: int) -> Iterator[subprocess.Popen[bytes]]:
+def spawned(kind: str, port: int, *extra: str) -> Iterator[subprocess.Popen[bytes]]:
     """A fresh process (never a fork of one holding a Zenoh session) serving ``kind``."""
     cmd = [sys.executable, "-m", "bench.zenoh_floor", "--serve", kind, "--port", str(port)]
+    cmd += extra
     proc = subprocess.Popen(cmd, cwd=REPO)
     try:
         yield proc
@@ -204,6 +236,75 @@ def tcp_rtt(pings: int) -> dict[str, object]:
             return _stats("tcp socket", _timed(call, pings))
 
 
+def decision_us(arenas: int, steps: int = 60) -> float:
+    """CPU µs of one in-process decision, ``arenas`` arenas stepped together with random
+    allowed actions (``bench_vector``'s loop)."""
+    from bench.bench_vector import play
+    from neuronsmae.server.vec import VecArena
+
+    env = VecArena(seed=1, num_envs=arenas)
+    try:
+        env.reset()
+        play(env, 3, np.random.default_rng(0))
+        start = time.process_time()
+        play(env, steps, np.random.default_rng(1))
+        return (time.process_time() - start) / (steps * arenas) * 1e6
+    finally:
+        env.close()
+
+
+def held_floor(pings: int, arenas: int, reply_bytes: int = HELD_REPLY_BYTES) -> dict[str, Any]:
+    """The vector path's floor: CPU µs per query to a server that holds each one for
+    ``arenas`` in-process decisions, by thread, less the hold itself; and the CPU ratio it
+    alone allows ``bench_vector`` at that K."""
+    decision = decision_us(arenas)
+    hold_s = decision * arenas / 1e6
+    port = free_port()
+    extra = ("--hold-ms", f"{hold_s * 1e3:.3f}", "--reply-bytes", str(reply_bytes))
+    with spawned("zenoh-held", port, *extra) as proc:
+        session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
+        assert isinstance(session, zenoh.Session)
+        try:
+            querier = session.declare_querier(
+                KEY, timeout=5.0, consolidation=zenoh.ConsolidationMode.NONE, express=True
+            )
+
+            def call() -> None:
+                replies = list(querier.get(payload=b"p" * 300))
+                if not replies or replies[0].ok is None:
+                    raise NoReply("no reply from the echo server")
+
+            _until_ready(lambda: call() or True)
+            for _ in range(5):
+                call()
+            procs = [psutil.Process(), psutil.Process(proc.pid)]
+            before = cpu_snapshot(procs)
+            for _ in range(pings):
+                call()
+            split = cpu_by_thread(before, cpu_snapshot(procs), [p.pid for p in procs])
+        finally:
+            session.close()
+    (client_main, client_other), (server_main, server_other) = (
+        [seconds / pings * 1e6 for seconds in row] for row in split
+    )
+    server_main -= hold_s * 1e6
+    floor = client_main + client_other + server_main + server_other
+    return {
+        "arenas": arenas,
+        "in_process_decision_us": round(decision, 1),
+        "hold_ms": round(hold_s * 1e3, 2),
+        "reply_bytes": reply_bytes,
+        "pings": pings,
+        "client_main_us": round(client_main, 1),
+        "client_other_us": round(client_other, 1),
+        "server_main_us": round(server_main, 1),
+        "server_other_us": round(server_other, 1),
+        "floor_us_per_query": round(floor, 1),
+        "floor_us_per_decision": round(floor / arenas, 1),
+        "cpu_ratio_bound": round(decision / (decision + floor / arenas), 3),
+    }
+
+
 def measure(pings: int) -> list[dict[str, object]]:
     """Every floor: first a query (what ``RM`` sends) to a sleeping and to a polling server,
     the ones ``bench_transport``'s bounds use."""
@@ -213,17 +314,33 @@ def measure(pings: int) -> list[dict[str, object]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pings", type=int, default=3000)
-    parser.add_argument("--serve", choices=sorted(SERVERS), help=argparse.SUPPRESS)
+    parser.add_argument("--arenas", type=int, default=8, help="K of the vector floor (0: skip)")
+    parser.add_argument("--held-pings", type=int, default=200, help="queries of the vector floor")
+    parser.add_argument("--serve", choices=[*sorted(SERVERS), "zenoh-held"], help=argparse.SUPPRESS)
     parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--hold-ms", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--reply-bytes", type=int, default=1, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
         # SIGTERM as SystemExit, so the server's ``finally`` closes its session.
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-        SERVERS[args.serve](args.port)
+        if args.serve == "zenoh-held":
+            serve_held(args.port, args.hold_ms / 1e3, args.reply_bytes)
+        else:
+            SERVERS[args.serve](args.port)
         return
     rows = measure(args.pings)
     print(table(rows, ["path", "pings", "median_us", "p99_us"]))
-    report = {"results": rows, "machine": machine(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    held = held_floor(args.held_pings, args.arenas) if args.arenas > 0 else None
+    if held is not None:
+        print("The vector path's floor (CPU µs, all threads of both processes, less the hold):")
+        print(table([held], list(held)))
+    report = {
+        "results": rows,
+        "vector_floor": held,
+        "machine": machine(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
     print(f"wrote {write_json('zenoh_floor', report)}")
 
 

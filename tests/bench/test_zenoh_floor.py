@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bench.bench_transport import bound
-from bench.zenoh_floor import measure
+from bench.zenoh_floor import held_floor, measure
 
 
 @pytest.mark.slow
@@ -30,3 +30,19 @@ def test_bound_is_a_decision_against_itself_plus_the_floor(
     per_s: float, floor_us: float, expected: float
 ) -> None:
     assert bound(per_s, floor_us) == pytest.approx(expected, abs=1e-3)
+
+
+@pytest.mark.slow
+def test_the_vector_floor_is_a_held_query_less_its_hold() -> None:
+    row = held_floor(pings=10, arenas=2)
+    parts = ("client_main_us", "client_other_us", "server_main_us", "server_other_us")
+    assert row["floor_us_per_query"] == pytest.approx(sum(row[p] for p in parts), abs=0.5)
+    assert row["hold_ms"] == pytest.approx(2 * row["in_process_decision_us"] / 1e3, abs=0.01)
+    # The held server spins through each hold: its main thread's CPU, less the holds, is the
+    # query's handling only, far below one hold.
+    assert 0 < row["server_main_us"] < row["hold_ms"] * 1e3
+    assert row["client_main_us"] > 0 and row["client_other_us"] > 0
+    per_decision = row["floor_us_per_query"] / 2
+    assert row["floor_us_per_decision"] == pytest.approx(per_decision, abs=0.1)
+    decision = row["in_process_decision_us"]
+    assert row["cpu_ratio_bound"] == pytest.approx(decision / (decision + per_decision), abs=1e-3)
