@@ -166,11 +166,14 @@ def _timed(call: Callable[[], object], pings: int, warm: int = 200) -> list[floa
     return times
 
 
-def zenoh_rtt(pings: int, poll: bool = False) -> dict[str, object]:
-    """Round trips of a one-byte query through the project's own session settings, to a
-    server that sleeps until a query comes or (``poll``) polls for it first."""
+@contextlib.contextmanager
+def _echo_query(
+    kind: str, payload: bytes, *extra: str
+) -> Iterator[tuple[subprocess.Popen[bytes], Callable[[], None]]]:
+    """A ``kind`` echo server on a free port and a call that queries it once with
+    ``payload`` through the project's own session settings (answering when yielded)."""
     port = free_port()
-    with spawned("zenoh-poll" if poll else "zenoh", port):
+    with spawned(kind, port, *extra) as proc:
         session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
         assert isinstance(session, zenoh.Session)
         try:
@@ -179,15 +182,22 @@ def zenoh_rtt(pings: int, poll: bool = False) -> dict[str, object]:
             )
 
             def call() -> None:
-                replies = list(querier.get(payload=b"p"))
+                replies = list(querier.get(payload=payload))
                 if not replies or replies[0].ok is None:  # the server is still declaring
                     raise NoReply("no reply from the echo server")
 
             _until_ready(lambda: call() or True)
-            name = "zenoh query, server polling" if poll else "zenoh query"
-            return _stats(name, _timed(call, pings))
+            yield proc, call
         finally:
             session.close()
+
+
+def zenoh_rtt(pings: int, poll: bool = False) -> dict[str, object]:
+    """Round trips of a one-byte query through the project's own session settings, to a
+    server that sleeps until a query comes or (``poll``) polls for it first."""
+    with _echo_query("zenoh-poll" if poll else "zenoh", b"p") as (_, call):
+        name = "zenoh query, server polling" if poll else "zenoh query"
+        return _stats(name, _timed(call, pings))
 
 
 def pubsub_rtt(pings: int) -> dict[str, object]:
@@ -259,31 +269,15 @@ def held_floor(pings: int, arenas: int, reply_bytes: int = HELD_REPLY_BYTES) -> 
     alone allows ``bench_vector`` at that K."""
     decision = decision_us(arenas)
     hold_s = decision * arenas / 1e6
-    port = free_port()
     extra = ("--hold-ms", f"{hold_s * 1e3:.3f}", "--reply-bytes", str(reply_bytes))
-    with spawned("zenoh-held", port, *extra) as proc:
-        session = _until_ready(lambda: zenoh.open(client_config("127.0.0.1", port)))
-        assert isinstance(session, zenoh.Session)
-        try:
-            querier = session.declare_querier(
-                KEY, timeout=5.0, consolidation=zenoh.ConsolidationMode.NONE, express=True
-            )
-
-            def call() -> None:
-                replies = list(querier.get(payload=b"p" * 300))
-                if not replies or replies[0].ok is None:
-                    raise NoReply("no reply from the echo server")
-
-            _until_ready(lambda: call() or True)
-            for _ in range(5):
-                call()
-            procs = [psutil.Process(), psutil.Process(proc.pid)]
-            before = cpu_snapshot(procs)
-            for _ in range(pings):
-                call()
-            split = cpu_by_thread(before, cpu_snapshot(procs), [p.pid for p in procs])
-        finally:
-            session.close()
+    with _echo_query("zenoh-held", b"p" * 300, *extra) as (proc, call):
+        for _ in range(5):
+            call()
+        procs = [psutil.Process(), psutil.Process(proc.pid)]
+        before = cpu_snapshot(procs)
+        for _ in range(pings):
+            call()
+        split = cpu_by_thread(before, cpu_snapshot(procs), [p.pid for p in procs])
     (client_main, client_other), (server_main, server_other) = (
         [seconds / pings * 1e6 for seconds in row] for row in split
     )
