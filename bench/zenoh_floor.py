@@ -54,15 +54,23 @@ class NoReply(RuntimeError):
 REPO = Path(__file__).resolve().parents[1]
 
 
-def serve_zenoh(port: int, busy_poll_s: float = 0.0) -> None:
-    """Answer every query on ``KEY`` with one byte, until killed; poll ``busy_poll_s`` for
-    the next query before blocking, exactly as ``neuronsmae-server --busy-poll`` does."""
+def serve_zenoh(
+    port: int, busy_poll_s: float = 0.0, hold_s: float = 0.0, reply_bytes: int = 1
+) -> None:
+    """Answer every query on ``KEY`` with ``reply_bytes`` bytes, until killed; poll
+    ``busy_poll_s`` for the next query before blocking, exactly as ``neuronsmae-server
+    --busy-poll`` does; spin ``hold_s`` before replying (the core busy, as a vector server's
+    is with its arenas)."""
     session = zenoh.open(server_config("127.0.0.1", port))
+    payload = b"x" * reply_bytes
     try:
         queryable = session.declare_queryable(KEY)
         while True:
             with next_query(queryable, busy_poll_s) as query:
-                query.reply(KEY, b"x", express=True)
+                end = time.perf_counter() + hold_s
+                while time.perf_counter() < end:
+                    pass
+                query.reply(KEY, payload, express=True)
     finally:
         session.close()
 
@@ -94,23 +102,6 @@ POLL_S = 2e-3
 """How long the polling echo server polls: as ``bench_transport``'s default busy poll."""
 HELD_REPLY_BYTES = 6_000
 """A K = 8 ``vstep`` reply of the abstract 2 v 2 task: 5.9 KB."""
-
-
-def serve_held(port: int, hold_s: float, reply_bytes: int) -> None:
-    """Answer each query on ``KEY`` with ``reply_bytes`` bytes after ``hold_s`` seconds of
-    spinning (the core busy, as a vector server's is with its arenas), until killed."""
-    session = zenoh.open(server_config("127.0.0.1", port))
-    payload = b"x" * reply_bytes
-    try:
-        queryable = session.declare_queryable(KEY)
-        while True:
-            with queryable.recv() as query:
-                end = time.perf_counter() + hold_s
-                while time.perf_counter() < end:
-                    pass
-                query.reply(KEY, payload, express=True)
-    finally:
-        session.close()
 
 
 SERVERS: dict[str, Callable[[int], None]] = {
@@ -249,16 +240,14 @@ def tcp_rtt(pings: int) -> dict[str, object]:
 def decision_us(arenas: int, steps: int = 60) -> float:
     """CPU µs of one in-process decision, ``arenas`` arenas stepped together with random
     allowed actions (``bench_vector``'s loop)."""
-    from bench.bench_vector import play
+    from bench.bench_vector import measure, play
     from neuronsmae.server.vec import VecArena
 
     env = VecArena(seed=1, num_envs=arenas)
     try:
         env.reset()
         play(env, 3, np.random.default_rng(0))
-        start = time.process_time()
-        play(env, steps, np.random.default_rng(1))
-        return (time.process_time() - start) / (steps * arenas) * 1e6
+        return measure(env, steps, 1, [psutil.Process()])[1]
     finally:
         env.close()
 
@@ -319,7 +308,7 @@ def main() -> None:
         # SIGTERM as SystemExit, so the server's ``finally`` closes its session.
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
         if args.serve == "zenoh-held":
-            serve_held(args.port, args.hold_ms / 1e3, args.reply_bytes)
+            serve_zenoh(args.port, hold_s=args.hold_ms / 1e3, reply_bytes=args.reply_bytes)
         else:
             SERVERS[args.serve](args.port)
         return
