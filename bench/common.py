@@ -16,8 +16,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-from neuronsmae.client import ping
-from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.client import answering_pid
 from neuronsmae.protocol.launch import ServerCommand, ServerProcess
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -133,16 +132,8 @@ def cpu_by_thread(before: CpuSnapshot, after: CpuSnapshot, pids: list[int]) -> l
 def start_server(port: int, *, arenas: int = 1, seed: int = 1234) -> ServerProcess:
     """An unpaced ``neuronsmae-server`` holding ``arenas`` arenas on ``port``, started as a
     client launches one (it exits with this process), ready when returned."""
-
-    def answers() -> bool:
-        try:
-            ping(port, timeout=1.0)
-        except ServerUnavailableError:
-            return False
-        return True
-
     server = ServerProcess(ServerCommand(port, seed, arenas=arenas, time_scale=0.0))
-    server.wait_ready(answers)
+    server.wait_ready(lambda: answering_pid(port))
     return server
 
 

@@ -9,10 +9,10 @@ build its arena in this process (``env="neuronsmae.server:Arena"``).
 
 from __future__ import annotations
 
-from neuronsmae.client.rm import RM, context_table, ping
+from neuronsmae.client.rm import RM, answering_pid, context_table, ping
 from neuronsmae.client.vec_rm import VecRM
 
-__all__ = ["RM", "VecRM", "context_table", "ping"]
+__all__ = ["RM", "VecRM", "answering_pid", "context_table", "ping"]
 
 # Faces (Gymnasium, PettingZoo, SMAC) over any ArenaAPI; registers the Gymnasium ids
 # NeuronsMAE/Coop-v0 and NeuronsMAE/Agents-v0.

@@ -63,13 +63,16 @@ def _shutdown(link: Link, server: ServerProcess | None, farewell: bytes) -> None
             server.stop()
 
 
-def _answers(link: Link, session: str) -> bool:
-    """Whether a server answers a ping on ``link`` now (used while a server starts)."""
+def _answering_pid(link: Link, session: str) -> int | None:
+    """The pid of the server answering a ping on ``link`` now, None while none answers
+    (used while a server starts, to tell the one launched from any other)."""
     try:
-        link.call(encode_request(Ping(), session), PROBE_TIMEOUT)
-    except ServerUnavailableError:
-        return False
-    return True
+        reply = decode_reply(link.call(encode_request(Ping(), session), PROBE_TIMEOUT))
+    except NeuronsMAEError:
+        return None
+    value = reply.value if isinstance(reply, OkReply) else None
+    pid = value.get("pid") if isinstance(value, dict) else None
+    return pid if isinstance(pid, int) else None
 
 
 class Call:
@@ -144,9 +147,9 @@ class Connection:
             )
         links: dict[int, Link] = {}
 
-        def ready(port: int) -> bool:
+        def ready(port: int) -> int | None:
             link = links.setdefault(port, Link(self.host, port))
-            return _answers(link, self.session_id)
+            return _answering_pid(link, self.session_id)
 
         try:
             self.server = launch_private(command, ready, self.host)
@@ -168,7 +171,7 @@ class Connection:
                 f"no server listens on {where}; servers are only launched on this machine"
             )
         self.server = ServerProcess(command(port))
-        self.server.wait_ready(lambda: _answers(self.link, self.session_id))
+        self.server.wait_ready(lambda: _answering_pid(self.link, self.session_id))
 
     # ---- requests ----------------------------------------------------------------------
 

@@ -194,8 +194,18 @@ def _query(body: Message, port: int, host: str, timeout: float) -> Any:
 def ping(port: int = 10000, host: str = "127.0.0.1", timeout: float = 2.0) -> dict[str, Any]:
     """Ask the server on ``host:port`` who it is: protocol ``version``, ``server`` id,
     whether it is ``owned`` by a client, its ``time_scale`` and how many ``arenas`` it
-    holds. Raises ServerUnavailableError."""
+    holds, and its ``pid``. Raises ServerUnavailableError."""
     return _query(Ping(), port, host, timeout)
+
+
+def answering_pid(port: int, host: str = "127.0.0.1", timeout: float = 1.0) -> int | None:
+    """The pid of the server answering a ping on ``host:port``, None while none answers:
+    a launcher waits for its own server's pid, since another may hold a port it picked."""
+    try:
+        pid = ping(port, host, timeout).get("pid")
+    except NeuronsMAEError:
+        return None
+    return pid if isinstance(pid, int) else None
 
 
 def context_table(

@@ -147,21 +147,31 @@ class ServerProcess:
         """The exit status if the server has exited, else None."""
         return self.proc.poll()
 
-    def wait_ready(self, probe: Callable[[], bool], timeout: float = STARTUP_TIMEOUT) -> None:
-        """Poll ``probe`` until it answers True; fail early if the server exits."""
+    def wait_ready(self, probe: Callable[[], int | None], timeout: float = STARTUP_TIMEOUT) -> None:
+        """Poll ``probe`` until this server answers; fail early if it exits.
+
+        ``probe`` returns the ``pid`` of the ping reply on this server's port, or None
+        while nothing answers. Only this process's own pid counts: another server that
+        bound the port between the pick and the launch answers too, and this one then
+        exits with :data:`PORT_IN_USE_STATUS`.
+        """
         deadline = time.monotonic() + timeout
+        other = None
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise ServerUnavailableError(
                     f"the server launched on port {self.port} exited with status "
                     f"{self.proc.returncode}:\n{self.log_tail()}"
                 )
-            if probe():
+            pid = probe()
+            if pid == self.proc.pid:
                 return
+            other = pid if pid is not None else other
             time.sleep(0.05)
         self.stop()
+        who = "" if other is None else f" (another server, pid {other}, answers on it)"
         raise ServerUnavailableError(
-            f"the server launched on port {self.port} did not answer within {timeout:g} s"
+            f"the server launched on port {self.port} did not answer within {timeout:g} s{who}"
         )
 
     def stop(self) -> None:
@@ -181,17 +191,19 @@ class ServerProcess:
 
 def launch_private(
     make: Callable[[int], ServerCommand],
-    ready: Callable[[int], bool],
+    ready: Callable[[int], int | None],
     host: str = "127.0.0.1",
     attempts: int = 5,
+    timeout: float = STARTUP_TIMEOUT,
 ) -> ServerProcess:
     """Launch a server on a free port of ``host`` (``make(port)`` builds its command) and
-    wait until ``ready(port)``; a port taken between the pick and the bind is retried."""
+    wait until it answers (``ready(port)`` is the pid answering a ping on ``port``, None
+    while nothing does); a port taken between the pick and the bind is retried."""
     for _ in range(attempts):
         port = free_port(host)
         server = ServerProcess(make(port))
         try:
-            server.wait_ready(functools.partial(ready, port))
+            server.wait_ready(functools.partial(ready, port), timeout)
             return server
         except ServerUnavailableError:
             if server.exited() != PORT_IN_USE_STATUS:

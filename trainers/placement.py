@@ -30,9 +30,8 @@ from typing import Any
 import ray
 from ray.exceptions import GetTimeoutError, RayError
 
-from neuronsmae.client import ping
-from neuronsmae.protocol.errors import ServerUnavailableError
-from neuronsmae.protocol.launch import ServerCommand, ServerProcess, free_port
+from neuronsmae.client import answering_pid
+from neuronsmae.protocol.launch import ServerCommand, ServerProcess, launch_private
 from neuronsmae.trainers.config import TrainConfig, parse_resources
 
 SERVER_STARTUP_S = 180.0
@@ -53,29 +52,33 @@ class ServerActor:
         self, port: int, seed: int, arenas: int = 1, host: str = "", time_scale: float = 0.0
     ) -> None:
         self.host = host or ray.util.get_node_ip_address()
-        self.port = port or free_port(self.host)
+        self.port = port  # 0: a free port, picked at the first start
         self.seed, self.arenas, self.time_scale = seed, arenas, time_scale
         self.starts = 0
         self.server: ServerProcess | None = None
         self._start()
 
     def _start(self) -> None:
-        """Launch (or relaunch) the server the same way ``RM`` launches a local one."""
+        """Launch (or relaunch, on the same port) the server the way ``RM`` launches one."""
         if self.server is not None:
             self.server.stop()
-        command = ServerCommand(
-            self.port, self.seed, self.host, arenas=self.arenas, time_scale=self.time_scale
-        )
-        self.server = ServerProcess(command)
         self.starts += 1
-        self.server.wait_ready(self._answers, SERVER_STARTUP_S)
+        if self.port:
+            self.server = ServerProcess(self._command(self.port))
+            self.server.wait_ready(lambda: answering_pid(self.port, self.host), SERVER_STARTUP_S)
+        else:
+            self.server = launch_private(
+                self._command,
+                lambda port: answering_pid(port, self.host),
+                self.host,
+                timeout=SERVER_STARTUP_S,
+            )
+            self.port = self.server.port
 
-    def _answers(self) -> bool:
-        try:
-            ping(self.port, self.host, timeout=1.0)
-        except ServerUnavailableError:
-            return False
-        return True
+    def _command(self, port: int) -> ServerCommand:
+        return ServerCommand(
+            port, self.seed, self.host, arenas=self.arenas, time_scale=self.time_scale
+        )
 
     def address(self) -> tuple[str, int]:
         """Host and port of a live server (started again first if it has died)."""

@@ -24,6 +24,7 @@ from __future__ import annotations
 import ctypes
 import gc
 import logging
+import os
 import time
 import uuid
 from collections.abc import Callable
@@ -392,6 +393,7 @@ class ArenaService:
             "owned": self._owner is not None,
             "time_scale": self._time_scale,
             "arenas": self.arenas,
+            "pid": os.getpid(),
         }
 
     def _close(self, body: Close, session: str) -> None:

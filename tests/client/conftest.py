@@ -17,8 +17,7 @@ import zenoh
 
 from bench.common import free_port as free_port  # re-exported: the tests import both here
 from bench.common import same as same
-from neuronsmae.client import ping
-from neuronsmae.protocol.errors import ServerUnavailableError
+from neuronsmae.client import answering_pid
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
 from neuronsmae.protocol.transport import client_config
 from neuronsmae.server.arena import Arena
@@ -49,11 +48,9 @@ class Server:
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise RuntimeError(f"server exited: {self.stderr()}")
-            try:
-                ping(self.port, timeout=1.0)
+            if answering_pid(self.port) == self.proc.pid:  # this server, not one on its port
                 return self
-            except ServerUnavailableError:
-                time.sleep(0.1)
+            time.sleep(0.1)
         raise RuntimeError(f"server on port {self.port} did not start")
 
     def stop(self, sig: int = signal.SIGTERM) -> int:

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from neuronsmae.client import RM, context_table, ping
+from neuronsmae.protocol import launch
 from neuronsmae.protocol.errors import (
     ERRORS,
     BusyError,
@@ -348,6 +349,25 @@ def test_port_in_use_fails_clearly(server_a: Server) -> None:
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
     assert f"port {server_a.port} on 127.0.0.1 is already in use" in done.stderr
+
+
+def test_a_private_launch_on_a_port_taken_meanwhile_moves_on(
+    server_a: Server, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two launchers on one machine can pick the same free port; the one whose server
+    lost the bind must not take the winner's answer for its own and claim it."""
+    picks = iter([server_a.port])
+    real = launch.free_port
+    monkeypatch.setattr(launch, "free_port", lambda host: next(picks, None) or real(host))
+    env = RM(seed=4)  # its first server exits (port in use), the second gets a fresh port
+    try:
+        assert env._conn.port != server_a.port
+        assert env._conn.server is not None
+        assert ping(env._conn.port)["pid"] == env._conn.server.proc.pid
+        assert ping(server_a.port)["owned"] is False  # the winner was never claimed
+        assert same(env.reset(), Arena(seed=4).reset())
+    finally:
+        env.close()
 
 
 @pytest.mark.slow
