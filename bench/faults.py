@@ -186,6 +186,22 @@ def servers(repeats: int, folder: Path) -> list[dict[str, Any]]:
     return rows
 
 
+TINY: dict[str, Any] = {
+    "eval_episodes": 2,
+    "final_eval_episodes": 2,
+    "batch_size": 4,
+    "learning_starts": 4,
+    "worker_cpus": 0.5,
+    "agent_hidden": 16,
+    "hypernet_hidden": 8,
+    "mixer_embed": 8,
+    "train_every": 1,
+    "envs_per_worker": 2,
+}
+"""Training settings small enough that a faulted run takes seconds (the faults, not the
+learning, are under test); ``envs_per_worker=2`` plays chunks of two episodes."""
+
+
 # ---- 2. a Ray rollout worker ---------------------------------------------------------------
 
 
@@ -194,11 +210,10 @@ def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
 
     from neuronsmae.trainers.config import make_config
     from neuronsmae.trainers.train import Trainer, train_seed
-    from tests.trainers.test_training import TINY
 
     base = {"alg": "vdn", "workers": 2, "episodes": episodes, "out": str(folder / "ray"),
-            "progress": False, "eval_every": 0, "final_eval_episodes": 2}  # fmt: skip
-    cfg = make_config(base, dict(kv.split("=") for kv in TINY))
+            "progress": False, "eval_every": 0}  # fmt: skip
+    cfg = make_config(base, TINY)
     state: dict[str, Any] = {}
 
     def hook(trainer: Trainer) -> None:
@@ -206,7 +221,7 @@ def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
         if "killed_at" not in state:
             mine = [t for t in trainer.sampler.in_flight.values() if t.worker == 0]
             if trainer.counters.episodes >= 4 and mine:
-                state["seeds"] = {t.request.seed for t in mine}
+                state["seeds"] = {r.seed for t in mine for r in t.requests}
                 ray.kill(trainer.sampler.actors[0])  # dies while playing those episodes
                 state["killed_at"] = now
         elif "recovered_at" not in state and state["seeds"] <= set(trainer.stored_seeds):
@@ -253,10 +268,9 @@ def _checkpoint_episodes(run: Path) -> int:
 
 
 def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]:
-    from tests.trainers.test_training import TINY
-
     run = folder / "learner"
-    sets = [a for kv in (*TINY, f"checkpoint_every={every}") for a in ("--set", kv)]
+    pairs = {**TINY, "checkpoint_every": every}
+    sets = [a for k, v in pairs.items() for a in ("--set", f"{k}={v}")]
     cmd = [sys.executable, "-m", "neuronsmae.trainers.cli", "--alg", "vdn", "--level", "easy",
            "--workers", "1", "--episodes", str(episodes), "--out", str(run), "--quiet",
            *sets]  # fmt: skip
