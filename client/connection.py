@@ -28,7 +28,13 @@ from neuronsmae.protocol.errors import (
     ServerUnavailableError,
     error_from_code,
 )
-from neuronsmae.protocol.launch import ServerCommand, ServerProcess, is_local, launch_private
+from neuronsmae.protocol.launch import (
+    PORT_IN_USE_STATUS,
+    ServerCommand,
+    ServerProcess,
+    is_local,
+    launch_private,
+)
 from neuronsmae.protocol.link import Link, Pending
 from neuronsmae.protocol.messages import (
     MAX_REQUEST_BYTES,
@@ -170,8 +176,16 @@ class Connection:
             raise ServerUnavailableError(
                 f"no server listens on {where}; servers are only launched on this machine"
             )
-        self.server = ServerProcess(command(port))
-        self.server.wait_ready(lambda: _answering_pid(self.link, self.session_id))
+        server = ServerProcess(command(port))
+        try:
+            server.wait_ready(lambda: _answering_pid(self.link, self.session_id))
+        except ServerUnavailableError:
+            server.stop()
+            lost_the_bind = server.exited() == PORT_IN_USE_STATUS
+            if not (lost_the_bind and _answering_pid(self.link, self.session_id) is not None):
+                raise
+            return  # another server took the port meanwhile: connect to it, as to any
+        self.server = server
 
     # ---- requests ----------------------------------------------------------------------
 

@@ -28,6 +28,7 @@ from neuronsmae.protocol.errors import (
     ServerUnavailableError,
 )
 from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import (
     MESSAGES,
     NOT_CONFIGURED,
@@ -368,6 +369,28 @@ def test_a_private_launch_on_a_port_taken_meanwhile_moves_on(
         assert same(env.reset(), Arena(seed=4).reset())
     finally:
         env.close()
+
+
+def test_an_explicit_port_taken_while_launching_is_joined(
+    server_a: Server, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Connect-or-launch on an explicit port: a server that binds the port between the
+    look and the launch is the one connected to (the launched one exits, port in use)."""
+    real, looks = Link.open, []
+
+    def open_(self: Link) -> bool:
+        looks.append(self.port)
+        return len(looks) > 1 and real(self)  # the first look finds nothing listening
+
+    monkeypatch.setattr(Link, "open", open_)
+    env = RM(seed=4, port=server_a.port)
+    try:
+        assert env._conn.server is None  # it launched none that lives
+        assert ping(server_a.port)["owned"] is True
+        assert same(env.reset(), Arena(seed=4).reset())
+    finally:
+        env.close()
+    assert ping(server_a.port)["owned"] is False
 
 
 @pytest.mark.slow
