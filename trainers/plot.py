@@ -35,6 +35,8 @@ PAPER_WIN_RATE: dict[str, dict[str, float]] = {
     "hard": {"iql": 0.23, "vdn": 0.41, "qmix": 0.34},
 }
 """The paper's win rates against the bot, 2 v 2, abstract actions (level → algorithm)."""
+LABEL_HEIGHT = 0.05
+"""Win rate a paper line's label spans on the win-rate axis (7-point text, 3 points off)."""
 COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 GRID_POINTS = 200
 """Environment-step grid that runs are interpolated on before averaging."""
@@ -198,18 +200,7 @@ def plot_runs(
                     )
     if not drew:
         raise RunDirError("the runs have no rows in train.csv or eval.csv yet: nothing to plot")
-    for alg, level in sorted({(r.alg.lower(), r.level) for r in runs}):
-        paper = PAPER_WIN_RATE.get(level, {}).get(alg)
-        if paper is not None:
-            ax_win.axhline(paper, color="black", ls=":", lw=1.2)
-            ax_win.annotate(
-                f"paper {alg.upper()} vs {level}: {paper:.2f}",
-                (0.01, paper),
-                xycoords=("axes fraction", "data"),
-                xytext=(0, 3),
-                textcoords="offset points",
-                fontsize=7,
-            )
+    _paper_lines(ax_win, {(r.alg.lower(), r.level) for r in runs})
     ax_win.set(xlabel="environment steps", ylabel="win rate vs bot", ylim=(-0.02, 1.02))
     ax_ret.set(xlabel="environment steps", ylabel="episode return (blue team)")
     for ax in (ax_win, ax_ret):
@@ -223,6 +214,29 @@ def plot_runs(
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, format="png")
     return out
+
+
+def _paper_lines(ax: Any, cells: set[tuple[str, str]]) -> None:
+    """A dotted line at the paper's win rate of each (algorithm, level) plotted, labelled
+    above the line, or below it where a label above would run into the one higher up."""
+    refs = sorted(
+        ((PAPER_WIN_RATE[level][alg], alg, level) for alg, level in cells
+         if alg in PAPER_WIN_RATE.get(level, {})),
+        reverse=True,
+    )  # fmt: skip
+    lowest = math.inf  # the lowest win rate a label placed so far reaches down to
+    for paper, alg, level in refs:
+        ax.axhline(paper, color="black", ls=":", lw=1.2)
+        above = paper + LABEL_HEIGHT <= lowest
+        ax.annotate(
+            f"paper {alg.upper()} vs {level}: {paper:.2f}",
+            (0.01, paper),
+            xycoords=("axes fraction", "data"),
+            xytext=(0, 3 if above else -9),
+            textcoords="offset points",
+            fontsize=7,
+        )
+        lowest = paper if above else paper - LABEL_HEIGHT
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -81,3 +81,14 @@ def test_paper_numbers_and_bad_paths(tmp_path: Path, capsys: pytest.CaptureFixtu
     (empty / "config.json").write_text(json.dumps({"alg": "vdn", "level": "easy"}))
     assert P.main([str(empty), "--out", str(tmp_path / "x.png")]) == 2
     assert "nothing to plot" in capsys.readouterr().err
+
+
+def test_paper_labels_close_together_do_not_overlap() -> None:
+    from matplotlib.figure import Figure
+
+    ax = Figure().subplots()
+    P._paper_lines(ax, {("vdn", "easy"), ("qmix", "easy"), ("iql", "easy")})
+    offsets = {t.get_text().split()[1]: t.xyann[1] for t in ax.texts}
+    # 0.93 and 0.89 are closer than a label is tall: the lower one goes under its line.
+    assert offsets == {"VDN": 3, "QMIX": -9, "IQL": 3}
+    assert sorted(line.get_ydata()[0] for line in ax.lines) == [0.75, 0.89, 0.93]
