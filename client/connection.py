@@ -69,11 +69,11 @@ def _shutdown(link: Link, server: ServerProcess | None, farewell: bytes) -> None
             server.stop()
 
 
-def _answering_pid(link: Link, session: str) -> int | None:
+def answering_pid(link: Link, session: str = "", timeout: float = PROBE_TIMEOUT) -> int | None:
     """The pid of the server answering a ping on ``link`` now, None while none answers
     (used while a server starts, to tell the one launched from any other)."""
     try:
-        reply = decode_reply(link.call(encode_request(Ping(), session), PROBE_TIMEOUT))
+        reply = decode_reply(link.call(encode_request(Ping(), session), timeout))
     except NeuronsMAEError:
         return None
     value = reply.value if isinstance(reply, OkReply) else None
@@ -155,7 +155,7 @@ class Connection:
 
         def ready(port: int) -> int | None:
             link = links.setdefault(port, Link(self.host, port))
-            return _answering_pid(link, self.session_id)
+            return answering_pid(link, self.session_id)
 
         try:
             self.server = launch_private(command, ready, self.host)
@@ -178,11 +178,11 @@ class Connection:
             )
         server = ServerProcess(command(port))
         try:
-            server.wait_ready(lambda: _answering_pid(self.link, self.session_id))
+            server.wait_ready(lambda: answering_pid(self.link, self.session_id))
         except ServerUnavailableError:
             server.stop()
             lost_the_bind = server.exited() == PORT_IN_USE_STATUS
-            if not (lost_the_bind and _answering_pid(self.link, self.session_id) is not None):
+            if not (lost_the_bind and answering_pid(self.link, self.session_id) is not None):
                 raise
             return  # another server took the port meanwhile: connect to it, as to any
         self.server = server

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.client.connection import Connection
+from neuronsmae.client.connection import answering_pid as pid_on_link
 from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
@@ -201,11 +202,11 @@ def ping(port: int = 10000, host: str = "127.0.0.1", timeout: float = 2.0) -> di
 def answering_pid(port: int, host: str = "127.0.0.1", timeout: float = 1.0) -> int | None:
     """The pid of the server answering a ping on ``host:port``, None while none answers:
     a launcher waits for its own server's pid, since another may hold a port it picked."""
+    link = Link(host, port)
     try:
-        pid = ping(port, host, timeout).get("pid")
-    except NeuronsMAEError:
-        return None
-    return pid if isinstance(pid, int) else None
+        return pid_on_link(link, timeout=timeout)
+    finally:
+        link.close()
 
 
 def context_table(
