@@ -109,7 +109,7 @@ def ray_round(sampler: Sampler, seconds: float, seed: int) -> float:
     return steps / max(last - start, 1e-9)
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--envs", type=int, nargs="+", default=[1, 8])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
@@ -119,9 +119,15 @@ def main() -> None:
     parser.add_argument("--worker-cpus", type=float, default=0.5)
     parser.add_argument("--groups", type=int, nargs="+", default=[1], help="served rows (1)")
     parser.add_argument("--servers", type=int, nargs="+", default=[1, 2], help="served rows")
-    args = parser.parse_args()
+    return parser
 
-    combos = [
+
+Combo = tuple[int, int, str, int, int]
+"""One Ray sampler measured: workers, envs per worker, env kind, groups, servers per worker."""
+
+
+def _combos(args: argparse.Namespace) -> list[Combo]:
+    return [
         (n, e, kind, g, s)
         for n in args.workers
         for e in args.envs
@@ -129,6 +135,11 @@ def main() -> None:
         for s in (args.servers if kind == "remote" and e > 1 else [1])
         for g in (args.groups if kind == "remote" and e > 1 else [1])
     ]
+
+
+def _measure(args: argparse.Namespace, combos: list[Combo]) -> dict[str, list[float]]:
+    """Interleaved rounds of the bare arena, a local worker per envs count and every Ray
+    sampler; env steps per second (per worker for the samplers), one entry per round."""
     # Every sampler's actors live at once (rounds interleave), so Ray must be told there
     # are enough CPUs for all of them; they still share the machine's real cores.
     cpus = math.ceil(sum(n for n, *_ in combos) * args.worker_cpus) + 1
@@ -138,7 +149,7 @@ def main() -> None:
     arena = Arena(seed=1)
     local = {e: RolloutWorker(0, "inprocess", 1, None, envs=e) for e in args.envs}
     policy = make_policy(local[args.envs[0]].env_info())
-    samplers: dict[tuple[int, int, str, int, int], Sampler] = {}
+    samplers: dict[Combo, Sampler] = {}
     rounds: dict[str, list[float]] = {"bare": []}
     try:
         for n, e, kind, g, s in combos:
@@ -173,34 +184,46 @@ def main() -> None:
             worker.close()
         arena.close()
         ray.shutdown()
+    return rounds
 
-    base = rounds["bare"]
 
-    def row(
-        label: str,
-        workers: int,
-        envs: int | str,
-        env: str,
-        key: str,
-        groups: int = 1,
-        servers: int = 1,
-    ) -> dict[str, Any]:
-        rates = rounds[key]
-        return {
-            "sampling": label,
-            "workers": workers,
-            "envs": envs,
-            "env": env,
-            "groups": groups,
-            "servers": servers,
-            "steps_per_s_per_worker": statistics.median(rates),
-            "ratio": statistics.median([a / b for a, b in zip(rates, base, strict=True)]),
-        }
+def _row(
+    rounds: dict[str, list[float]],
+    label: str,
+    workers: int,
+    envs: int,
+    env: str,
+    key: str,
+    groups: int = 1,
+    servers: int = 1,
+) -> dict[str, Any]:
+    """One table row: the median rate over rounds and the median of its per-round ratio to
+    the bare arena's rate in the same round."""
+    rates = rounds[key]
+    return {
+        "sampling": label,
+        "workers": workers,
+        "envs": envs,
+        "env": env,
+        "groups": groups,
+        "servers": servers,
+        "steps_per_s_per_worker": statistics.median(rates),
+        "ratio": statistics.median([a / b for a, b in zip(rates, rounds["bare"], strict=True)]),
+    }
 
-    rows = [row("bare arena, random actions", 1, 1, "inprocess", "bare")]
-    rows += [row("worker, no Ray", 1, e, "inprocess", f"worker {e}") for e in local]
+
+def main() -> None:
+    args = _parser().parse_args()
+    combos = _combos(args)
+    rounds = _measure(args, combos)
+    rows = [_row(rounds, "bare arena, random actions", 1, 1, "inprocess", "bare")]
     rows += [
-        row("Ray sampler", n, e, k, f"ray {n} {e} {k} {g} {s}", g, s) for n, e, k, g, s in samplers
+        _row(rounds, "worker, no Ray", 1, e, "inprocess", f"worker {e}")
+        for e in dict.fromkeys(args.envs)
+    ]
+    rows += [
+        _row(rounds, "Ray sampler", n, e, k, f"ray {n} {e} {k} {g} {s}", g, s)
+        for n, e, k, g, s in combos
     ]
     columns = ["sampling", "workers", "envs", "env", "servers", "groups"]
     columns += ["steps_per_s_per_worker", "ratio"]
