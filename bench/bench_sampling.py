@@ -187,18 +187,10 @@ def _measure(args: argparse.Namespace, combos: list[Combo]) -> dict[str, list[fl
     return rounds
 
 
-def _row(
-    rounds: dict[str, list[float]],
-    label: str,
-    workers: int,
-    envs: int,
-    env: str,
-    key: str,
-    groups: int = 1,
-    servers: int = 1,
-) -> dict[str, Any]:
+def _row(rounds: dict[str, list[float]], label: str, key: str, combo: Combo) -> dict[str, Any]:
     """One table row: the median rate over rounds and the median of its per-round ratio to
     the bare arena's rate in the same round."""
+    workers, envs, env, groups, servers = combo
     rates = rounds[key]
     return {
         "sampling": label,
@@ -216,15 +208,12 @@ def main() -> None:
     args = _parser().parse_args()
     combos = _combos(args)
     rounds = _measure(args, combos)
-    rows = [_row(rounds, "bare arena, random actions", 1, 1, "inprocess", "bare")]
+    rows = [_row(rounds, "bare arena, random actions", "bare", (1, 1, "inprocess", 1, 1))]
     rows += [
-        _row(rounds, "worker, no Ray", 1, e, "inprocess", f"worker {e}")
+        _row(rounds, "worker, no Ray", f"worker {e}", (1, e, "inprocess", 1, 1))
         for e in dict.fromkeys(args.envs)
     ]
-    rows += [
-        _row(rounds, "Ray sampler", n, e, k, f"ray {n} {e} {k} {g} {s}", g, s)
-        for n, e, k, g, s in combos
-    ]
+    rows += [_row(rounds, "Ray sampler", "ray {} {} {} {} {}".format(*c), c) for c in combos]
     columns = ["sampling", "workers", "envs", "env", "servers", "groups"]
     columns += ["steps_per_s_per_worker", "ratio"]
     print(table(rows, columns))
