@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -49,6 +50,10 @@ def test_a_thread_born_in_between_counts_from_zero_and_apart_from_main() -> None
     assert main < 0.05  # the main thread only waited
     assert abs(cpu_between(before, seen) - (main + other)) < 1e-9
     # The thread has ended: it counts not at all, so what remains is the main thread's.
+    # ``join`` returns a moment before the kernel drops the thread from /proc: wait for that.
+    deadline = time.monotonic() + 5
+    while os.path.exists(f"/proc/{me.pid}/task/{worker.native_id}") and time.monotonic() < deadline:
+        time.sleep(0.001)
     after = cpu_snapshot([me])
     assert (me.pid, worker.native_id) not in after
     assert 0.0 <= cpu_between(seen, after) < 0.05
