@@ -284,6 +284,13 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
         f"({sum(r['env_steps'] for r in done) / 1e6:.1f} million decisions), {hours:.1f} h "
         "of wall time (training and tests)."
     )
+    ours = [r for r in records if r["learner"] == "defaults"]
+    if ours:
+        lines.append(
+            f"Project's learner: {len(ours)} of {len(LEVELS) * seeds} runs recorded (VDN), "
+            f"{sum(r['episodes'] for r in ours):,} training episodes, "
+            f"{sum(r['wall_minutes'] for r in ours) / 60:.1f} h of wall time."
+        )
     return "\n".join(lines + _retests(done))
 
 
@@ -330,7 +337,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{test_at(args, args.test_at)} record(s) tested at {args.test_at}")
         return 0
     if args.report:
-        print(report(load(args.out), len(args.seeds)))
+        table = load(args.out)
+        print(report(table, _seed_count(table, args.seeds)))
         return 0
     algs = args.algs or (list(ALGS) if args.learner == "paper" else ["vdn"])
     table = load(args.out)
@@ -346,8 +354,14 @@ def main(argv: list[str] | None = None) -> int:
                 table["records"].append(line)
                 save(args.out, table)
                 print(f"recorded {alg}/{level}/s{seed}: {line['test']}", flush=True)
-    print(report(table, len(args.seeds)))
+    print(report(table, _seed_count(table, args.seeds)))
     return 0
+
+
+def _seed_count(table: dict[str, Any], seeds: Sequence[int]) -> int:
+    """Seeds per cell the report expects: those asked for and those already recorded (a
+    run of ``--seeds 1`` alone still reports the table's three)."""
+    return len(set(seeds) | {r["seed"] for r in table["records"]})
 
 
 if __name__ == "__main__":

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from bench.paper_table import interval, report
+from bench.paper_table import interval, main, report
 
 
 def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper") -> dict:
@@ -39,9 +41,26 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     assert vdn[6].strip() == "0.900 (s1 0.900; 1 of 3 seeds)"  # the project's learner
     assert "0.250 (s2 0.250; 1 of 3 seeds)" in rows[("hard", "IQL")]
     assert rows[("middle", "QMIX")].count("—") == 3
-    assert lines[-1].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
-    assert "(5.9 million decisions)" in lines[-1]
-    assert "2.0 h of wall time" in lines[-1]
+    assert lines[-2].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
+    assert "(5.9 million decisions)" in lines[-2]
+    assert "2.0 h of wall time" in lines[-2]
+    assert lines[-1] == (
+        "Project's learner: 1 of 9 runs recorded (VDN), 30,000 training episodes, 0.5 h of "
+        "wall time."
+    )
+    assert not any(
+        line.startswith("Project's") for line in report({"records": records[:4]}).splitlines()
+    )
+
+
+def test_main_counts_the_seeds_recorded_beside_those_asked_for(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "table.json"
+    records = [_record("vdn", "easy", s, 0.5) for s in (1, 2, 3)]
+    out.write_text(json.dumps({"records": records}))
+    assert main(["--report", "--seeds", "1", "--out", str(out)]) == 0
+    assert "Paper preset: 3 of 27 runs recorded" in capsys.readouterr().out
 
 
 def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
