@@ -286,8 +286,10 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
     )
     ours = [r for r in records if r["learner"] == "defaults"]
     if ours:
+        algs = [a for a in ALGS if any(r["alg"] == a for r in ours)]
         lines.append(
-            f"Project's learner: {len(ours)} of {len(LEVELS) * seeds} runs recorded (VDN), "
+            f"Project's learner: {len(ours)} of {len(algs) * len(LEVELS) * seeds} runs "
+            f"recorded ({', '.join(a.upper() for a in algs)}), "
             f"{sum(r['episodes'] for r in ours):,} training episodes, "
             f"{sum(r['wall_minutes'] for r in ours) / 60:.1f} h of wall time."
         )
