@@ -60,12 +60,41 @@ def _dtype_of(text: Any) -> np.dtype:
     return dtype
 
 
+_PREFIXES: dict[tuple[str, tuple[int, ...]], bytes] = {}
+"""Packed ``[dtype, shape, <bin header>`` of the layouts already encoded: a step's arrays
+repeat a few layouts, so their payload is one lookup and one concatenation."""
+_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...]]] = {}
+"""The same prefixes, decoding side: prefix bytes -> (dtype, shape), all fields vetted."""
+_PREFIX_LENGTHS: list[int] = []
+"""Distinct lengths of the prefixes in ``_HEADERS`` (a handful)."""
+MAX_LAYOUTS = 64
+"""Most layouts each cache holds; a full cache is emptied (the layouts in use refill it)."""
+
+
+def _prefix(dtype_text: str, shape: tuple[int, ...], nbytes: int) -> bytes:
+    """The msgpack bytes of ``[dtype_text, shape, data]`` up to the data itself."""
+    packed = msgpack.packb([dtype_text, list(shape), b""], use_bin_type=True)
+    if nbytes < 1 << 8:
+        bin_header = b"\xc4" + nbytes.to_bytes(1, "big")
+    elif nbytes < 1 << 16:
+        bin_header = b"\xc5" + nbytes.to_bytes(2, "big")
+    else:
+        bin_header = b"\xc6" + nbytes.to_bytes(4, "big")
+    return packed[:-2] + bin_header  # the empty bin's header (c4 00) is replaced
+
+
 def _array_payload(array: np.ndarray) -> bytes:
-    if array.dtype.kind not in ALLOWED_KINDS or array.dtype.fields is not None:
-        raise MalformedMessageError(f"cannot encode an array of dtype {array.dtype}")
-    header = [array.dtype.str, list(array.shape)]
-    data = np.ascontiguousarray(array).tobytes()
-    return msgpack.packb([*header, data], use_bin_type=True, buf_size=len(data) + 64)
+    dtype = array.dtype
+    key = (dtype.str, array.shape)
+    prefix = _PREFIXES.get(key)
+    if prefix is None:
+        if dtype.kind not in ALLOWED_KINDS or dtype.fields is not None:
+            raise MalformedMessageError(f"cannot encode an array of dtype {dtype}")
+        prefix = _prefix(dtype.str, array.shape, array.nbytes)
+        if len(_PREFIXES) >= MAX_LAYOUTS:
+            _PREFIXES.clear()  # the layouts in use come back at once
+        _PREFIXES[key] = prefix
+    return prefix + array.tobytes()
 
 
 def _default(obj: Any) -> Any:
@@ -99,7 +128,38 @@ def encode(obj: Any) -> bytes:
 
 
 def _unpack_array(data: bytes) -> np.ndarray:
-    """Decode one array extension, checking every field before trusting the length."""
+    """Decode one array extension, checking every field before trusting the length.
+
+    A payload that starts with the prefix of a layout already vetted (and is exactly as
+    long as that layout needs) is read at once; any other is parsed field by field."""
+    size = len(data)
+    for length in _PREFIX_LENGTHS:
+        known = _HEADERS.get(data[:length])
+        if known is not None:
+            dtype, shape = known
+            if size - length == dtype.itemsize * _count(shape):
+                return np.frombuffer(data, dtype=dtype, offset=length).reshape(shape).copy()
+    array = _parse_array(data)
+    prefix = _prefix(array.dtype.str, array.shape, array.nbytes)
+    if data.startswith(prefix) and len(data) == len(prefix) + array.nbytes:
+        if len(_HEADERS) >= MAX_LAYOUTS:
+            _HEADERS.clear()
+            _PREFIX_LENGTHS.clear()
+        _HEADERS[prefix] = (array.dtype, array.shape)
+        if len(prefix) not in _PREFIX_LENGTHS:
+            _PREFIX_LENGTHS.append(len(prefix))
+    return array
+
+
+def _count(shape: tuple[int, ...]) -> int:
+    count = 1
+    for n in shape:
+        count *= n
+    return count
+
+
+def _parse_array(data: bytes) -> np.ndarray:
+    """Decode one array extension field by field."""
     try:
         fields = msgpack.unpackb(data, raw=False, use_list=True, max_array_len=MAX_NDIM + 3)
     except (ValueError, TypeError, msgpack.UnpackException) as exc:

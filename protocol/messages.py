@@ -14,6 +14,7 @@ within one protocol version is what makes a version bump meaningful.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -281,10 +282,35 @@ class Request:
     session: str = ""
 
 
+@dataclass(frozen=True)
+class _Field:
+    """One wire field of a message class: its name, checker and whether it may be left out."""
+
+    name: str
+    check: Callable[[str, Any], Any]
+    required: bool
+
+
+@functools.cache
+def _fields_of(cls: type[Message]) -> tuple[tuple[_Field, ...], frozenset[str]]:
+    """The wire fields of ``cls`` and every key a request of it may hold (read once per
+    class: a request's hot path then touches no dataclass machinery)."""
+    fields = tuple(
+        _Field(
+            f.name,
+            f.metadata["check"],
+            f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+        )
+        for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+    )
+    return fields, frozenset(f.name for f in fields) | frozenset(ENVELOPE)
+
+
 def encode_request(body: Message, session: str = "") -> bytes:
     """The wire bytes of ``body`` sent by ``session``."""
     wire = {"v": PROTOCOL_VERSION, "type": body.TYPE, "session": session}
-    wire.update((f.name, getattr(body, f.name)) for f in dataclasses.fields(body))
+    for f in _fields_of(type(body))[0]:
+        wire[f.name] = getattr(body, f.name)
     return encode(wire)
 
 
@@ -329,17 +355,16 @@ def decode_request(data: bytes | bytearray | memoryview) -> Request:
 
 
 def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    extra = set(wire) - set(fields) - set(ENVELOPE)
-    if extra:
-        names = sorted(map(repr, extra))[:5]
+    fields, allowed = _fields_of(cls)
+    if not allowed.issuperset(wire):
+        names = sorted(map(repr, set(wire) - allowed))[:5]
         raise MalformedMessageError(f"{cls.TYPE!r} request has unknown fields {names}")
     values: dict[str, Any] = {}
-    for name, spec in fields.items():
-        if name in wire:
-            values[name] = spec.metadata["check"](name, wire[name])
-        elif spec.default is dataclasses.MISSING and spec.default_factory is dataclasses.MISSING:
-            raise MalformedMessageError(f"{cls.TYPE!r} request lacks field {name!r}")
+    for f in fields:
+        if f.name in wire:
+            values[f.name] = f.check(f.name, wire[f.name])
+        elif f.required:
+            raise MalformedMessageError(f"{cls.TYPE!r} request lacks field {f.name!r}")
     return cls(**values)
 
 

@@ -100,6 +100,31 @@ def test_dtype_spellings_are_remembered_only_when_valid_and_few() -> None:
         assert bad not in codec._DTYPES
 
 
+def test_array_layouts_are_remembered_without_changing_the_wire() -> None:
+    """Arrays of a layout seen before are packed and read through a remembered prefix: the
+    bytes are exactly the field-by-field ``[dtype, shape, data]`` extension, a payload that
+    only starts like a known layout is still checked field by field, and the caches stay
+    small whatever shapes arrive."""
+    array = np.arange(12, dtype=np.float32).reshape(3, 4)
+    for _ in range(2):  # the first time fills the caches, the second uses them
+        payload = encode(array)
+        assert payload == _ext(EXT_NDARRAY, ["<f4", [3, 4], array.tobytes()])
+        assert same(array, decode(payload, max_bytes=LIMIT))
+    assert ("<f4", (3, 4)) in codec._PREFIXES
+    data = array.tobytes()
+    for body in (data + b"\0", data[:-1], data):  # a known prefix, the wrong amount of data
+        ext = msgpack.packb(["<f4", [3, 4], body], use_bin_type=True)
+        with pytest.raises(MalformedMessageError):
+            decode(msgpack.packb(msgpack.ExtType(EXT_NDARRAY, ext + b"\0")), max_bytes=LIMIT)
+        if body is not data:
+            with pytest.raises(MalformedMessageError):
+                decode(msgpack.packb(msgpack.ExtType(EXT_NDARRAY, ext)), max_bytes=LIMIT)
+    for n in range(2 * codec.MAX_LAYOUTS):
+        assert same(np.zeros(n, np.uint8), decode(encode(np.zeros(n, np.uint8)), max_bytes=LIMIT))
+    assert len(codec._PREFIXES) <= codec.MAX_LAYOUTS
+    assert len(codec._HEADERS) <= codec.MAX_LAYOUTS
+
+
 def test_non_contiguous_and_special_values() -> None:
     base = np.arange(24, dtype=np.float32).reshape(4, 6)
     for array in (base.T, base[::2, 1::3], np.array([np.nan, -0.0, np.inf, -np.inf])):
