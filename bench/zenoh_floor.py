@@ -17,6 +17,12 @@ K in-process decisions take (measured first, in this run) with a reply as big as
 ``vstep`` reply. The client's core idles meanwhile, as it does while a vector server steps
 its arenas, and waking from that idle is what most of this floor pays for. Divided by K,
 it bounds ``bench_vector``'s CPU ratio: ``decision_us / (decision_us + floor_us / K)``.
+Measured twice: with a server that spins through the hold (its caches stay as the query
+left them: the lowest floor), and with one that steps K real arenas (their CPU, which it
+reports in each reply, is subtracted): its caches then end up as full of the arenas' data as
+a vector server's, and every query is handled cold, as served requests are. The second is
+the floor of a vector server whose own request handling costs nothing;
+``bench.request_cost`` times that handling, warm and cold.
 
 Prints Markdown tables and writes bench/out/zenoh_floor.json.
 """
@@ -54,15 +60,42 @@ class NoReply(RuntimeError):
 REPO = Path(__file__).resolve().parents[1]
 
 
+class ArenaHold:
+    """Holds each query by stepping K in-process arenas once (random allowed actions), and
+    counts the CPU that took in this thread."""
+
+    def __init__(self, arenas: int) -> None:
+        from neuronsmae.server.vec import VecArena
+
+        self.env = VecArena(seed=1, num_envs=arenas)
+        self.env.reset()
+        self.rng = np.random.default_rng(0)
+        self.held_ns = 0
+        """CPU nanoseconds spent stepping the arenas so far."""
+
+    def __call__(self) -> None:
+        start = time.thread_time_ns()
+        avail = self.env.get_avail_actions()
+        self.env.step((avail * self.rng.random(avail.shape)).argmax(-1))
+        self.held_ns += time.thread_time_ns() - start
+
+
 def serve_zenoh(
-    port: int, busy_poll_s: float = 0.0, hold_s: float = 0.0, reply_bytes: int = 1
+    port: int,
+    busy_poll_s: float = 0.0,
+    hold_s: float = 0.0,
+    reply_bytes: int = 1,
+    hold_arenas: int = 0,
 ) -> None:
     """Answer every query on ``KEY`` with ``reply_bytes`` bytes, until killed; poll
     ``busy_poll_s`` for the next query before blocking, exactly as ``neuronsmae-server
-    --busy-poll`` does; spin ``hold_s`` before replying (the core busy, as a vector server's
-    is with its arenas)."""
+    --busy-poll`` does. Before replying, spin ``hold_s`` (the core busy, its caches as the
+    query left them) or step ``hold_arenas`` in-process arenas once (the core busy as a
+    vector server's is, its caches full of the arenas' data); the reply then starts with
+    the CPU nanoseconds all such steps took so far (8 bytes, big-endian)."""
     session = zenoh.open(server_config("127.0.0.1", port))
-    payload = b"x" * reply_bytes
+    hold = ArenaHold(hold_arenas) if hold_arenas > 0 else None
+    filler = b"x" * max(reply_bytes - 8, 0)
     try:
         queryable = session.declare_queryable(KEY)
         while True:
@@ -70,7 +103,10 @@ def serve_zenoh(
                 end = time.perf_counter() + hold_s
                 while time.perf_counter() < end:
                     pass
-                query.reply(KEY, payload, express=True)
+                if hold is not None:
+                    hold()
+                held = hold.held_ns if hold is not None else 0
+                query.reply(KEY, held.to_bytes(8, "big") + filler, express=True)
     finally:
         session.close()
 
@@ -102,6 +138,8 @@ POLL_S = 2e-3
 """How long the polling echo server polls: as ``bench_transport``'s default busy poll."""
 HELD_REPLY_BYTES = 6_000
 """A K = 8 ``vstep`` reply of the abstract 2 v 2 task: 5.9 KB."""
+HOLDS = ("spin", "arenas")
+"""How a held echo server keeps its core busy (see :func:`held_floor`)."""
 
 
 SERVERS: dict[str, Callable[[int], None]] = {
@@ -160,7 +198,7 @@ def _timed(call: Callable[[], object], pings: int, warm: int = 200) -> list[floa
 @contextlib.contextmanager
 def _echo_query(
     kind: str, payload: bytes, *extra: str
-) -> Iterator[tuple[subprocess.Popen[bytes], Callable[[], None]]]:
+) -> Iterator[tuple[subprocess.Popen[bytes], Callable[[], bytes]]]:
     """A ``kind`` echo server on a free port and a call that queries it once with
     ``payload`` through the project's own session settings (answering when yielded)."""
     port = free_port()
@@ -172,12 +210,13 @@ def _echo_query(
                 KEY, timeout=5.0, consolidation=zenoh.ConsolidationMode.NONE, express=True
             )
 
-            def call() -> None:
+            def call() -> bytes:
                 replies = list(querier.get(payload=payload))
                 if not replies or replies[0].ok is None:  # the server is still declaring
                     raise NoReply("no reply from the echo server")
+                return replies[0].ok.payload.to_bytes()
 
-            _until_ready(lambda: call() or True)
+            _until_ready(call)
             yield proc, call
         finally:
             session.close()
@@ -252,27 +291,40 @@ def decision_us(arenas: int, steps: int = 60) -> float:
         env.close()
 
 
-def held_floor(pings: int, arenas: int, reply_bytes: int = HELD_REPLY_BYTES) -> dict[str, Any]:
+def held_floor(
+    pings: int, arenas: int, reply_bytes: int = HELD_REPLY_BYTES, hold: str = "spin"
+) -> dict[str, Any]:
     """The vector path's floor: CPU µs per query to a server that holds each one for
     ``arenas`` in-process decisions, by thread, less the hold itself; and the CPU ratio it
-    alone allows ``bench_vector`` at that K."""
+    alone allows ``bench_vector`` at that K. ``hold``: ``"spin"`` spins for as long as the
+    decisions take (measured first, here); ``"arenas"`` has the server step ``arenas`` real
+    arenas and subtracts the CPU those steps took (which the server reports)."""
+    if hold not in HOLDS:
+        raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
     decision = decision_us(arenas)
     hold_s = decision * arenas / 1e6
-    extra = ("--hold-ms", f"{hold_s * 1e3:.3f}", "--reply-bytes", str(reply_bytes))
+    if hold == "spin":
+        extra = ("--hold-ms", f"{hold_s * 1e3:.3f}", "--reply-bytes", str(reply_bytes))
+    else:
+        extra = ("--hold-arenas", str(arenas), "--reply-bytes", str(reply_bytes))
     with _echo_query("zenoh-held", b"p" * 300, *extra) as (proc, call):
         for _ in range(5):
-            call()
+            first = call()
         procs = [psutil.Process(), psutil.Process(proc.pid)]
         before = cpu_snapshot(procs)
         for _ in range(pings):
-            call()
+            last = call()
         split = cpu_by_thread(before, cpu_snapshot(procs), [p.pid for p in procs])
     (client_main, client_other), (server_main, server_other) = (
         [seconds / pings * 1e6 for seconds in row] for row in split
     )
+    if hold == "arenas":
+        held_ns = int.from_bytes(last[:8], "big") - int.from_bytes(first[:8], "big")
+        hold_s = held_ns / 1e9 / pings
     server_main -= hold_s * 1e6
     floor = client_main + client_other + server_main + server_other
     return {
+        "hold": hold,
         "arenas": arenas,
         "in_process_decision_us": round(decision, 1),
         "hold_ms": round(hold_s * 1e3, 2),
@@ -303,24 +355,31 @@ def main() -> None:
     parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--hold-ms", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--reply-bytes", type=int, default=1, help=argparse.SUPPRESS)
+    parser.add_argument("--hold-arenas", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
         # SIGTERM as SystemExit, so the server's ``finally`` closes its session.
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
         if args.serve == "zenoh-held":
-            serve_zenoh(args.port, hold_s=args.hold_ms / 1e3, reply_bytes=args.reply_bytes)
+            serve_zenoh(
+                args.port,
+                hold_s=args.hold_ms / 1e3,
+                reply_bytes=args.reply_bytes,
+                hold_arenas=args.hold_arenas,
+            )
         else:
             SERVERS[args.serve](args.port)
         return
     rows = measure(args.pings)
     print(table(rows, ["path", "pings", "median_us", "p99_us"]))
-    held = held_floor(args.held_pings, args.arenas) if args.arenas > 0 else None
-    if held is not None:
+    held = [held_floor(args.held_pings, args.arenas, hold=h) for h in HOLDS if args.arenas > 0]
+    if held:
         print("The vector path's floor (CPU µs, all threads of both processes, less the hold):")
-        print(table([held], list(held)))
+        print(table(held, list(held[0])))
     report = {
         "results": rows,
-        "vector_floor": held,
+        "vector_floor": held[0] if held else None,
+        "vector_floor_arenas": held[1] if held else None,
         "machine": machine(),
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }

@@ -46,3 +46,20 @@ def test_the_vector_floor_is_a_held_query_less_its_hold() -> None:
     assert row["floor_us_per_decision"] == pytest.approx(per_decision, abs=0.1)
     decision = row["in_process_decision_us"]
     assert row["cpu_ratio_bound"] == pytest.approx(decision / (decision + per_decision), abs=1e-3)
+
+
+@pytest.mark.slow
+def test_the_arena_held_floor_subtracts_the_arenas_reported_cpu() -> None:
+    row = held_floor(pings=10, arenas=2, hold="arenas")
+    assert row["hold"] == "arenas"
+    # The server reports what its arenas took: about two in-process decisions per query.
+    decisions_ms = 2 * row["in_process_decision_us"] / 1e3
+    assert 0.3 * decisions_ms < row["hold_ms"] < 3 * decisions_ms
+    parts = ("client_main_us", "client_other_us", "server_main_us", "server_other_us")
+    assert row["floor_us_per_query"] == pytest.approx(sum(row[p] for p in parts), abs=0.5)
+    assert row["server_main_us"] < row["hold_ms"] * 1e3
+
+
+def test_an_unknown_hold_is_refused_with_the_valid_ones() -> None:
+    with pytest.raises(ValueError, match="spin"):
+        held_floor(pings=1, arenas=1, hold="sleep")
