@@ -40,16 +40,7 @@ import numpy as np
 
 from bench.common import machine, table, write_json
 from neuronsmae.client.vec_rm import VecRM
-from neuronsmae.protocol.messages import (
-    Configure,
-    OkReply,
-    VReset,
-    VStep,
-    decode_reply,
-    decode_request,
-    encode_reply,
-    encode_request,
-)
+from neuronsmae.protocol import messages as wire
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.serving.service import ArenaService
 from neuronsmae.server.vec import VecArena
@@ -91,8 +82,8 @@ def run(k: int, samples: int) -> tuple[list[dict[str, Any]], float]:
     rng = np.random.default_rng(1)
     try:
         service._build(1, {})
-        service.handle(encode_request(Configure(seed=1, arenas=k), SESSION))
-        service.handle(encode_request(VReset(), SESSION))
+        service.handle(wire.encode_request(wire.Configure(seed=1, arenas=k), SESSION))
+        service.handle(wire.encode_request(wire.VReset(), SESSION))
         local.reset()
         remote.reset()
         vec = service._vec
@@ -104,10 +95,10 @@ def run(k: int, samples: int) -> tuple[list[dict[str, Any]], float]:
             dones.copy(),
             [dict(i) for i in infos],
         )
-        request = encode_request(VStep(actions=actions), SESSION)
+        request = wire.encode_request(wire.VStep(actions=actions), SESSION)
         value = {"obs": obs, "state": vec.get_state(), "avail_actions": vec.get_avail_actions(),
                  "rewards": rewards, "dones": dones, "infos": infos}  # fmt: skip
-        reply = encode_reply(OkReply(value))
+        reply = wire.encode_reply(wire.OkReply(value))
         remote._conns[0].link = AnsweringLink(reply)  # type: ignore[assignment]
 
         def local_step() -> None:
@@ -115,11 +106,11 @@ def run(k: int, samples: int) -> tuple[list[dict[str, Any]], float]:
             local.step((avail * rng.random(avail.shape)).argmax(-1))
 
         pieces: dict[str, Callable[[], Any]] = {
-            "client: encode request": lambda: encode_request(VStep(actions=actions), SESSION),
-            "server: decode request": lambda: decode_request(request),
+            "client: encode request": lambda: wire.encode_request(wire.VStep(actions), SESSION),
+            "server: decode request": lambda: wire.decode_request(request),
             "server: handle, arenas aside": lambda: service.handle(request),
-            "server: encode reply": lambda: encode_reply(OkReply(value)),
-            "client: decode reply": lambda: decode_reply(reply),
+            "server: encode reply": lambda: wire.encode_reply(wire.OkReply(value)),
+            "client: decode reply": lambda: wire.decode_reply(reply),
             "client: VecRM.step, transport aside": lambda: remote.step(actions),
         }
         sweep = np.ones(SWEEP_BYTES // 8)
