@@ -103,9 +103,10 @@ def serve_zenoh(
                 end = time.perf_counter() + hold_s
                 while time.perf_counter() < end:
                     pass
+                held = 0
                 if hold is not None:
                     hold()
-                held = hold.held_ns if hold is not None else 0
+                    held = hold.held_ns
                 query.reply(KEY, held.to_bytes(8, "big") + filler, express=True)
     finally:
         session.close()
@@ -303,10 +304,8 @@ def held_floor(
         raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
     decision = decision_us(arenas)
     hold_s = decision * arenas / 1e6
-    if hold == "spin":
-        extra = ("--hold-ms", f"{hold_s * 1e3:.3f}", "--reply-bytes", str(reply_bytes))
-    else:
-        extra = ("--hold-arenas", str(arenas), "--reply-bytes", str(reply_bytes))
+    how = ("--hold-ms", f"{hold_s * 1e3:.3f}") if hold == "spin" else ("--hold-arenas", str(arenas))
+    extra = (*how, "--reply-bytes", str(reply_bytes))
     with _echo_query("zenoh-held", b"p" * 300, *extra) as (proc, call):
         for _ in range(5):
             first = call()

@@ -195,9 +195,6 @@ class VecRM(VecArenaAPI):
         if not self._started:
             raise ResetNeededError("step() called before reset(): call reset() first")
         rows = self._rows(actions)
-        if seeds is None and contexts is None and active is None and len(self._conns) == 1:
-            # a sampler's step: one request, nothing to split (the checks below are no-ops)
-            return _PendingStep(self, [self._conns[0].send(VStep(rows), InvalidActionError)])
         seed_list = None if seeds is None else self._entries("seeds", seeds, InvalidContextError)
         if seed_list is not None:
             self._check_seeds(seed_list)

@@ -63,8 +63,8 @@ def _dtype_of(text: Any) -> np.dtype:
 _PREFIXES: dict[tuple[str, tuple[int, ...]], bytes] = {}
 """Packed ``[dtype, shape, <bin header>`` of the layouts already encoded: a step's arrays
 repeat a few layouts, so their payload is one lookup and one concatenation."""
-_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...]]] = {}
-"""The same prefixes, decoding side: prefix bytes -> (dtype, shape), all fields vetted."""
+_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...], int]] = {}
+"""The same prefixes, decoding side: prefix bytes -> (dtype, shape, data bytes), all vetted."""
 _PREFIX_LENGTHS: list[int] = []
 """Distinct lengths of the prefixes in ``_HEADERS`` (a handful)."""
 MAX_LAYOUTS = 64
@@ -136,26 +136,19 @@ def _unpack_array(data: bytes) -> np.ndarray:
     for length in _PREFIX_LENGTHS:
         known = _HEADERS.get(data[:length])
         if known is not None:
-            dtype, shape = known
-            if size - length == dtype.itemsize * _count(shape):
+            dtype, shape, nbytes = known
+            if size - length == nbytes:
                 return np.frombuffer(data, dtype=dtype, offset=length).reshape(shape).copy()
     array = _parse_array(data)
     prefix = _prefix(array.dtype.str, array.shape, array.nbytes)
-    if data.startswith(prefix) and len(data) == len(prefix) + array.nbytes:
+    if data.startswith(prefix):  # spelled as this codec spells it (the parse saw the rest)
         if len(_HEADERS) >= MAX_LAYOUTS:
             _HEADERS.clear()
             _PREFIX_LENGTHS.clear()
-        _HEADERS[prefix] = (array.dtype, array.shape)
+        _HEADERS[prefix] = (array.dtype, array.shape, array.nbytes)
         if len(prefix) not in _PREFIX_LENGTHS:
             _PREFIX_LENGTHS.append(len(prefix))
     return array
-
-
-def _count(shape: tuple[int, ...]) -> int:
-    count = 1
-    for n in shape:
-        count *= n
-    return count
 
 
 def _parse_array(data: bytes) -> np.ndarray:
