@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench.common import at_least, non_negative
 from neuronsmae.trainers.config import LEVELS, TrainConfig, make_config, parse_overrides
 from neuronsmae.trainers.mixers import ALGORITHMS
 from neuronsmae.trainers.train import train
@@ -45,13 +46,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--alg", choices=sorted(ALGORITHMS), default="vdn")
     p.add_argument("--level", choices=LEVELS, default="easy")
-    p.add_argument("--minutes", type=float, default=30.0, help="wall-clock training budget")
-    p.add_argument("--episodes", type=int, default=1_000_000, help="episode cap")
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--eval-every", type=int, default=500, help="episodes between evaluations")
-    p.add_argument("--eval-episodes", type=int, default=50)
-    p.add_argument("--final-eval", type=int, default=200, help="episodes of the final eval")
+    p.add_argument(
+        "--minutes", type=non_negative, default=30.0, help="wall-clock training budget (0: none)"
+    )
+    p.add_argument("--episodes", type=at_least(1), default=1_000_000, help="episode cap")
+    p.add_argument("--workers", type=at_least(0), default=2, help="rollout workers (0: auto)")
+    p.add_argument("--seed", type=at_least(0), default=1)
+    p.add_argument(
+        "--eval-every", type=at_least(0), default=500, help="episodes between evaluations (0: none)"
+    )
+    p.add_argument("--eval-episodes", type=at_least(1), default=50)
+    p.add_argument("--final-eval", type=at_least(1), default=200, help="episodes of the final eval")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--out", type=Path, default=OUT)
     return p.parse_args(argv)

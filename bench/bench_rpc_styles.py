@@ -28,7 +28,15 @@ import psutil
 import zenoh
 
 from bench.bench_transport import play
-from bench.common import cpu_by_thread, cpu_snapshot, free_port, machine, table, write_json
+from bench.common import (
+    at_least,
+    cpu_by_thread,
+    cpu_snapshot,
+    free_port,
+    machine,
+    table,
+    write_json,
+)
 from neuronsmae.protocol.messages import (
     Configure,
     OkReply,
@@ -112,8 +120,8 @@ def remote_round(client: StyleClient, decisions: int, rng: np.random.Generator) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--decisions", type=int, default=200)
-    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--decisions", type=at_least(1), default=200)
+    parser.add_argument("--rounds", type=at_least(1), default=7)
     parser.add_argument("--serve", nargs=2, metavar=("PORT", "STYLE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:

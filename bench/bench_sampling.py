@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import ray
 
-from bench.common import machine, table, write_json
+from bench.common import arena_count, at_least, machine, positive, table, write_json
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.server import Arena
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
@@ -49,6 +49,7 @@ CONTEXTS = {"level": "easy"}
 EPSILON = 0.2
 TARGET = 0.75
 TARGET_ENVS = 8
+ENV_KINDS = ("inprocess", "remote")
 
 
 def make_policy(info: dict[str, Any]) -> Policy:
@@ -111,15 +112,32 @@ def ray_round(sampler: Sampler, seconds: float, seed: int) -> float:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--envs", type=int, nargs="+", default=[1, 8])
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--env", nargs="+", default=["inprocess", "remote"])
-    parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--worker-cpus", type=float, default=0.5)
-    parser.add_argument("--groups", type=int, nargs="+", default=[1], help="served rows (1)")
-    parser.add_argument("--servers", type=int, nargs="+", default=[1, 2], help="served rows")
+    parser.add_argument("--envs", type=arena_count, nargs="+", default=[1, 8])
+    parser.add_argument("--workers", type=at_least(1), nargs="+", default=[1, 2])
+    parser.add_argument("--env", nargs="+", choices=ENV_KINDS, default=list(ENV_KINDS))
+    parser.add_argument("--seconds", type=positive, default=10.0)
+    parser.add_argument("--repeats", type=at_least(1), default=3)
+    parser.add_argument("--worker-cpus", type=positive, default=0.5)
+    parser.add_argument(
+        "--groups", type=at_least(1), nargs="+", default=[1], help="served rows (1)"
+    )
+    parser.add_argument(
+        "--servers", type=at_least(1), nargs="+", default=[1, 2], help="served rows"
+    )
     return parser
+
+
+def _args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options, refusing a served row whose worker would have more servers than arenas."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    served = [e for e in args.envs if e > 1] if "remote" in args.env else []
+    if served and max(args.servers) > min(served):
+        parser.error(
+            f"--servers must not exceed --envs in a served row (a server holds at least one "
+            f"arena): got --servers {max(args.servers)} with --envs {min(served)}"
+        )
+    return args
 
 
 Combo = tuple[int, int, str, int, int]
@@ -205,7 +223,7 @@ def _row(rounds: dict[str, list[float]], label: str, key: str, combo: Combo) -> 
 
 
 def main() -> None:
-    args = _parser().parse_args()
+    args = _args()
     combos = _combos(args)
     rounds = _measure(args, combos)
     rows = [_row(rounds, "bare arena, random actions", "bare", (1, 1, "inprocess", 1, 1))]

@@ -34,7 +34,17 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import machine, process_cpu_seconds, table, write_json
+from bench.common import (
+    MAX_PORT,
+    arena_count,
+    at_least,
+    machine,
+    positive,
+    process_cpu_seconds,
+    table,
+    tcp_port,
+    write_json,
+)
 from neuronsmae.client import VecRM
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec
 
@@ -155,14 +165,24 @@ def projection(rows: list[dict]) -> list[dict]:
     return out
 
 
+def check_ports(parser: argparse.ArgumentParser, base_port: int, counts: list[int]) -> None:
+    """Refuse a fleet whose last port, ``base_port + max(counts) - 1``, is past the last."""
+    if counts and base_port + max(counts) - 1 > MAX_PORT:
+        parser.error(
+            f"--base-port {base_port} with --counts up to {max(counts)} puts servers past "
+            f"port {MAX_PORT}"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--counts", type=int, nargs="+", default=[1, 2, 4, 8])
-    parser.add_argument("--envs", type=int, default=8, help="arenas per server (8)")
-    parser.add_argument("--seconds", type=float, default=8.0)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--base-port", type=int, default=18000)
+    parser.add_argument("--counts", type=at_least(1), nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument("--envs", type=arena_count, default=8, help="arenas per server (8)")
+    parser.add_argument("--seconds", type=positive, default=8.0)
+    parser.add_argument("--repeats", type=at_least(1), default=3)
+    parser.add_argument("--base-port", type=tcp_port, default=18000)
     args = parser.parse_args()
+    check_ports(parser, args.base_port, args.counts)
     load_before = os.getloadavg()
     rows = measure(sorted(args.counts), args.envs, args.seconds, args.repeats, args.base_port)
     proj = projection(rows)

@@ -37,9 +37,11 @@ import numpy as np
 import psutil
 
 from bench.common import (
+    at_least,
     cpu_between,
     cpu_by_thread,
     cpu_snapshot,
+    finite,
     free_port,
     machine,
     table,
@@ -50,6 +52,7 @@ from neuronsmae.client import RM
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import Ping, encode_request
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 from neuronsmae.server.arena import Arena
 
 CONFIGS: dict[str, dict[str, Any]] = {
@@ -179,12 +182,12 @@ def bound(in_process_per_s: float, floor_us: float) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--decisions", type=int, default=150)
-    parser.add_argument("--rounds", type=int, default=7)
-    parser.add_argument("--pings", type=int, default=2000)
+    parser.add_argument("--decisions", type=at_least(1), default=150)
+    parser.add_argument("--rounds", type=at_least(1), default=7)
+    parser.add_argument("--pings", type=at_least(1), default=2000)
     parser.add_argument(
         "--busy-poll-us",
-        type=float,
+        type=finite(0.0, MAX_BUSY_POLL_US),
         nargs="*",
         default=[2000.0],
         help="also measure servers that poll this many µs for the next request (2000); "

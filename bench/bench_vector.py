@@ -36,7 +36,16 @@ import numpy as np
 import psutil
 
 from bench.bench_transport import compare
-from bench.common import cpu_between, cpu_by_thread, cpu_snapshot, machine, table, write_json
+from bench.common import (
+    arena_count,
+    at_least,
+    cpu_between,
+    cpu_by_thread,
+    cpu_snapshot,
+    machine,
+    table,
+    write_json,
+)
 from neuronsmae.client.vec_rm import VecRM
 from neuronsmae.protocol.interface import VecArenaAPI
 from neuronsmae.server.vec import VecArena
@@ -132,18 +141,24 @@ def _row(k: int, runs: dict[str, list[Any]], idle_mb: float, played_mb: float) -
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--envs", type=int, nargs="+", default=[1, 4, 8, 16])
-    parser.add_argument("--steps", type=int, default=40, help="vector steps per round at K=8")
-    parser.add_argument("--rounds", type=int, default=21)
-    parser.add_argument("--pingpong-decisions", type=int, default=150)
+    parser.add_argument("--envs", type=arena_count, nargs="+", default=[1, 4, 8, 16])
+    parser.add_argument(
+        "--steps", type=at_least(1), default=40, help="vector steps per round at K=8"
+    )
+    parser.add_argument("--rounds", type=at_least(1), default=21)
+    parser.add_argument(
+        "--pingpong-decisions", type=at_least(0), default=150, help="0: no ping-pong"
+    )
     args = parser.parse_args()
     rows = run(args.envs, args.steps, args.rounds)
-    pingpong = compare(
-        "abstract 2v2",
-        {"action_space": "abstract", "n_blue": 2, "n_red": 2},
-        args.pingpong_decisions,
-        args.rounds,
-    )
+    pingpong = None
+    if args.pingpong_decisions:
+        pingpong = compare(
+            "abstract 2v2",
+            {"action_space": "abstract", "n_blue": 2, "n_red": 2},
+            args.pingpong_decisions,
+            args.rounds,
+        )
     print(
         table(
             rows,
@@ -171,10 +186,11 @@ def main() -> None:
             f"{at['server_rss_mb_per_arena_played']:.0f} MB per served arena "
             f"(target ≤ {MEMORY_TARGET_MB:.0f})"
         )
-    print(
-        f"one arena, one query per decision (RM against Arena): speed ratio "
-        f"{pingpong['ratio']:.3f}, CPU ratio {pingpong['cpu_ratio']:.3f}"
-    )
+    if pingpong is not None:
+        print(
+            f"one arena, one query per decision (RM against Arena): speed ratio "
+            f"{pingpong['ratio']:.3f}, CPU ratio {pingpong['cpu_ratio']:.3f}"
+        )
     report = {
         "steps_per_round_at_8": args.steps,
         "rounds": args.rounds,

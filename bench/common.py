@@ -1,9 +1,11 @@
-"""Shared helpers for the benchmark scripts: timing by medians, CPU clocks, tables and JSON
-output."""
+"""Shared helpers for the benchmark scripts: timing by medians, CPU clocks, argparse types
+for their options, tables and JSON output."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import os
 import platform
 import socket
@@ -18,8 +20,11 @@ import psutil
 
 from neuronsmae.client import answering_pid
 from neuronsmae.protocol.launch import ServerCommand, ServerProcess
+from neuronsmae.protocol.messages import MAX_ARENAS
 
 OUT = Path(__file__).resolve().parent / "out"
+MAX_PORT = 65_535
+"""The highest TCP port."""
 
 CpuSnapshot = dict[tuple[int, int], float]
 """On-CPU seconds so far of each live thread, keyed by (process id, thread id)."""
@@ -40,6 +45,77 @@ def rate(fn: Callable[[], int], seconds: float, repeats: int) -> dict[str, float
         "max": max(rates),
         "repeats": repeats,
     }
+
+
+def _integer(text: str) -> int:
+    """``text`` as an integer, or an argparse refusal naming it."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse ``type`` for integers of at least ``minimum``; anything else is refused
+    with a message naming the bound."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+def between(minimum: int, maximum: int) -> Callable[[str], int]:
+    """An argparse ``type`` for integers in ``[minimum, maximum]``, refusing others by bounds."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if not minimum <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"must be in [{minimum}, {maximum}], got {value}")
+        return value
+
+    return parse
+
+
+def tcp_port(text: str) -> int:
+    """An argparse ``type`` for a TCP port, in ``[1, MAX_PORT]``."""
+    return between(1, MAX_PORT)(text)
+
+
+def arena_count(text: str) -> int:
+    """An argparse ``type`` for arenas on one server or vector, in ``[1, MAX_ARENAS]``."""
+    return between(1, MAX_ARENAS)(text)
+
+
+def finite(
+    minimum: float, maximum: float = math.inf, *, above: bool = False
+) -> Callable[[str], float]:
+    """An argparse ``type`` for finite numbers in [minimum, maximum] (``above``: > minimum)."""
+    if maximum < math.inf:
+        bound = f"in ({minimum:g}, {maximum:g}]" if above else f"in [{minimum:g}, {maximum:g}]"
+    else:
+        bound = f"above {minimum:g}" if above else f"of at least {minimum:g}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        low_ok = value > minimum if above else value >= minimum
+        if not (math.isfinite(value) and low_ok and value <= maximum):
+            raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {value}")
+        return value
+
+    return parse
+
+
+positive = finite(0.0, above=True)
+"""An argparse ``type`` for finite numbers above 0 (seconds, timeouts, CPU shares)."""
+non_negative = finite(0.0)
+"""An argparse ``type`` for finite numbers of at least 0 (a budget where 0 means none)."""
 
 
 def free_port() -> int:

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.common import free_port, machine, same, table, write_json
+from bench.common import at_least, free_port, machine, same, table, write_json
 from neuronsmae.client import RM
 from neuronsmae.protocol.errors import ResetNeededError, ServerUnavailableError
 from neuronsmae.server.arena import Arena
@@ -322,7 +322,7 @@ def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=at_least(1), default=3)
     parser.add_argument("--skip", nargs="*", default=[], choices=["servers", "ray", "learner"])
     args = parser.parse_args()
     report: dict[str, Any] = {"machine": machine(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}

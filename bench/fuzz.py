@@ -37,7 +37,17 @@ import msgpack
 import numpy as np
 import zenoh
 
-from bench.common import free_port, machine, same, start_server, table, write_json
+from bench.common import (
+    arena_count,
+    at_least,
+    free_port,
+    machine,
+    positive,
+    same,
+    start_server,
+    table,
+    write_json,
+)
 from neuronsmae.client import RM, VecRM
 from neuronsmae.protocol.errors import ERRORS, NeuronsMAEError, ServerError
 from neuronsmae.protocol.messages import (
@@ -419,11 +429,13 @@ def campaign(arenas: int, count: int, seed: int, timeout: float) -> dict[str, An
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--payloads", type=int, default=20_000, help="per phase 1; phase 2: /4")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds per query")
     parser.add_argument(
-        "--arenas", type=int, nargs="+", default=[1, 3], help="one campaign per server size"
+        "--payloads", type=at_least(1), default=20_000, help="per phase 1; phase 2: /4"
+    )
+    parser.add_argument("--seed", type=at_least(0), default=0)
+    parser.add_argument("--timeout", type=positive, default=5.0, help="seconds per query")
+    parser.add_argument(
+        "--arenas", type=arena_count, nargs="+", default=[1, 3], help="one campaign per server size"
     )
     args = parser.parse_args()
     t0 = time.perf_counter()

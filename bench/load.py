@@ -30,8 +30,18 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from bench.bench_scaling import measure
-from bench.common import free_port, machine, start_server, table, write_json
+from bench.bench_scaling import check_ports, measure
+from bench.common import (
+    arena_count,
+    at_least,
+    free_port,
+    machine,
+    positive,
+    start_server,
+    table,
+    tcp_port,
+    write_json,
+)
 from neuronsmae.client import RM
 from neuronsmae.protocol.codec import encode
 from neuronsmae.protocol.errors import BusyError
@@ -195,14 +205,15 @@ def _percentiles(latency: list[float]) -> dict[str, float]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--clients", type=int, default=8)
-    parser.add_argument("--decisions", type=int, default=2000)
-    parser.add_argument("--counts", type=int, nargs="*", default=[1, 2, 4, 8])
-    parser.add_argument("--envs", type=int, default=1, help="arenas per server in part 2")
-    parser.add_argument("--seconds", type=float, default=8.0)
-    parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--base-port", type=int, default=18100)
+    parser.add_argument("--clients", type=at_least(1), default=8)
+    parser.add_argument("--decisions", type=at_least(1), default=2000)
+    parser.add_argument("--counts", type=at_least(1), nargs="*", default=[1, 2, 4, 8])
+    parser.add_argument("--envs", type=arena_count, default=1, help="arenas per server in part 2")
+    parser.add_argument("--seconds", type=positive, default=8.0)
+    parser.add_argument("--repeats", type=at_least(1), default=1)
+    parser.add_argument("--base-port", type=tcp_port, default=18100)
     args = parser.parse_args()
+    check_ports(parser, args.base_port, args.counts)
     t0 = time.perf_counter()
     part1 = contention(args.clients, args.decisions)
     print(f"{args.clients} clients: {part1['owners']} owner, {part1['refused']} refused (busy)")

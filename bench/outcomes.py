@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from bench.common import machine, table, write_json
+from bench.common import at_least, machine, table, write_json
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.sim.field import START_BULLETS
 from neuronsmae.trainers.config import TrainConfig
@@ -147,8 +147,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("checkpoint", help="checkpoint file or run directory")
     parser.add_argument("--level", default="easy", choices=["easy", "middle", "hard"])
-    parser.add_argument("--episodes", type=int, default=80)
-    parser.add_argument("--seed", type=int, default=TEST_SEED)
+    parser.add_argument("--episodes", type=at_least(1), default=80)
+    parser.add_argument("--seed", type=at_least(0), default=TEST_SEED)
     args = parser.parse_args()
     torch.set_num_threads(1)
     policy = GreedyPolicy(args.checkpoint)

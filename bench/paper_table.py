@@ -49,6 +49,7 @@ from typing import Any
 
 from scipy import stats
 
+from bench.common import at_least, non_negative
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
 from neuronsmae.trainers.contexts import ContextSpec
@@ -318,10 +319,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--learner", choices=("paper", "defaults"), default="paper")
     p.add_argument("--algs", nargs="+", choices=ALGS, default=None)
     p.add_argument("--levels", nargs="+", choices=LEVELS, default=list(LEVELS))
-    p.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--seeds", nargs="+", type=at_least(0), default=[1, 2, 3])
+    p.add_argument("--workers", type=at_least(0), default=2, help="rollout workers (0: auto)")
     p.add_argument("--env", choices=("inprocess", "remote"), default="inprocess")
-    p.add_argument("--minutes", type=float, default=30.0, help="defaults: budget per run")
+    p.add_argument(
+        "--minutes", type=non_negative, default=30.0, help="defaults: budget per run (0: none)"
+    )
     p.add_argument("--runs", type=Path, default=Path("runs/table"))
     p.add_argument("--out", type=Path, default=Path("docs/data/paper_table.json"))
     p.add_argument(

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.common import machine, table, write_json
+from bench.common import arena_count, at_least, machine, table, write_json
 from neuronsmae.client.vec_rm import VecRM
 from neuronsmae.protocol import messages as wire
 from neuronsmae.server.arena import Arena
@@ -139,8 +139,10 @@ def run(k: int, samples: int) -> tuple[list[dict[str, Any]], float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--arenas", type=int, default=8, help="K arenas per request")
-    parser.add_argument("--samples", type=int, default=300, help="timed calls per piece/state")
+    parser.add_argument("--arenas", type=arena_count, default=8, help="K arenas per request")
+    parser.add_argument(
+        "--samples", type=at_least(1), default=300, help="timed calls per piece/state"
+    )
     args = parser.parse_args()
     rows, decisions_us = run(args.arenas, args.samples)
     print(f"CPU µs per request of {args.arenas} arenas (median of {args.samples}):")

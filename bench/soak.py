@@ -36,7 +36,17 @@ from typing import Any
 import numpy as np
 import psutil
 
-from bench.common import free_port, machine, process_cpu_seconds, start_server, table, write_json
+from bench.common import (
+    MAX_ARENAS,
+    arena_count,
+    at_least,
+    free_port,
+    machine,
+    process_cpu_seconds,
+    start_server,
+    table,
+    write_json,
+)
 from neuronsmae.client import RM, VecRM
 
 RSS_GROWTH_LIMIT = 0.05
@@ -187,17 +197,19 @@ def windows(run: dict[str, Any], warmup: int, window: int) -> list[dict[str, Any
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--decisions", type=int, default=100_000)
-    parser.add_argument("--warmup", type=int, default=1000)
-    parser.add_argument("--window", type=int, default=10_000, help="decisions per window")
-    parser.add_argument("--envs", type=int, default=1, help="arenas on the server, in [1, 64]")
+    parser.add_argument("--decisions", type=at_least(1), default=100_000)
+    parser.add_argument("--warmup", type=at_least(0), default=1000)
+    parser.add_argument("--window", type=at_least(1), default=10_000, help="decisions per window")
+    parser.add_argument(
+        "--envs", type=arena_count, default=1, help=f"arenas on the server, in [1, {MAX_ARENAS}]"
+    )
     parser.add_argument("--action-space", default="discrete", choices=["discrete", "continuous"])
-    parser.add_argument("--rebuilds", type=int, default=16, help="reconfigures of a fresh server")
+    parser.add_argument(
+        "--rebuilds", type=at_least(0), default=16, help="reconfigures of a fresh server"
+    )
     args = parser.parse_args()
     if args.decisions < args.warmup + 2 * args.window:
         parser.error("--decisions must exceed --warmup by at least two windows")
-    if not 1 <= args.envs <= 64:
-        parser.error(f"--envs must be in [1, 64], got {args.envs}")
     if args.envs > 1 and args.action_space != "discrete":
         parser.error("--envs > 1 plays the discrete action space only")
     load_before = psutil.getloadavg()

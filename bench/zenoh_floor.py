@@ -45,7 +45,19 @@ import numpy as np
 import psutil
 import zenoh
 
-from bench.common import cpu_by_thread, cpu_snapshot, free_port, machine, table, write_json
+from bench.common import (
+    MAX_ARENAS,
+    at_least,
+    between,
+    cpu_by_thread,
+    cpu_snapshot,
+    free_port,
+    machine,
+    non_negative,
+    table,
+    tcp_port,
+    write_json,
+)
 from neuronsmae.protocol.transport import client_config, server_config
 from neuronsmae.server.serving.rpc import next_query
 
@@ -347,15 +359,20 @@ def measure(pings: int) -> list[dict[str, object]]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--pings", type=int, default=3000)
-    parser.add_argument("--arenas", type=int, default=8, help="K of the vector floor (0: skip)")
-    parser.add_argument("--held-pings", type=int, default=200, help="queries of the vector floor")
+    arenas = between(0, MAX_ARENAS)
+    parser.add_argument("--pings", type=at_least(1), default=3000)
+    parser.add_argument("--arenas", type=arenas, default=8, help="K of the vector floor (0: skip)")
+    parser.add_argument(
+        "--held-pings", type=at_least(1), default=200, help="queries of the vector floor"
+    )
     parser.add_argument("--serve", choices=[*sorted(SERVERS), "zenoh-held"], help=argparse.SUPPRESS)
-    parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
-    parser.add_argument("--hold-ms", type=float, default=0.0, help=argparse.SUPPRESS)
-    parser.add_argument("--reply-bytes", type=int, default=1, help=argparse.SUPPRESS)
-    parser.add_argument("--hold-arenas", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--port", type=tcp_port, help=argparse.SUPPRESS)
+    parser.add_argument("--hold-ms", type=non_negative, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--reply-bytes", type=at_least(0), default=1, help=argparse.SUPPRESS)
+    parser.add_argument("--hold-arenas", type=arenas, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.serve and args.port is None:
+        parser.error("--serve needs --port")
     if args.serve:
         # SIGTERM as SystemExit, so the server's ``finally`` closes its session.
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))

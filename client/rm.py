@@ -86,7 +86,7 @@ class RM(ArenaAPI):
         busy_poll_us: float = 0.0,
         **options: Any,
     ) -> None:
-        check_launch(time_scale, busy_poll_us)
+        check_launch(time_scale, busy_poll_us, seed=seed)
         self.seed, self.host, self.timeout = seed, host, float(timeout)
         self.router = router
         self.options = dict(options)

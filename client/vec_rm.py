@@ -88,7 +88,7 @@ class VecRM(VecArenaAPI):
         busy_poll_us: float = 0.0,
         **options: Any,
     ) -> None:
-        check_launch(time_scale, busy_poll_us)
+        check_launch(time_scale, busy_poll_us, seed=seed)
         ports = ports_of(port)
         count = len(ports) if ports is not None else servers
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import ipaddress
+import math
 import os
 import signal
 import socket
@@ -25,8 +26,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import IO, Any
 
+import numpy as np
+
 from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
-from neuronsmae.protocol.messages import MAX_ARENAS
+from neuronsmae.protocol.messages import MAX_ARENAS, MAX_SEED
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 
 STARTUP_TIMEOUT = 120.0
@@ -56,16 +59,28 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
-def check_launch(time_scale: float, busy_poll_us: float, arenas: int = 1) -> None:
-    """Refuse settings the server would exit on, before starting it, naming what is valid."""
-    if not time_scale >= 0:  # also refuses NaN
-        raise InvalidOptionError(f"time_scale must be >= 0 (0 = unlimited), got {time_scale!r}")
+def check_launch(
+    time_scale: float, busy_poll_us: float, arenas: int = 1, seed: int | None = None
+) -> None:
+    """Refuse settings the server would exit on, before starting it, naming what is valid
+    (``seed``: the first arena's; the others take the next ones)."""
+    if not (math.isfinite(time_scale) and time_scale >= 0):
+        raise InvalidOptionError(
+            f"time_scale must be a finite number >= 0 (0 = unlimited), got {time_scale!r}"
+        )
     if not 0 <= busy_poll_us <= MAX_BUSY_POLL_US:
         raise InvalidOptionError(
             f"busy_poll_us must be in [0, {MAX_BUSY_POLL_US:g}] microseconds, got {busy_poll_us!r}"
         )
     if isinstance(arenas, bool) or not isinstance(arenas, int) or not 1 <= arenas <= MAX_ARENAS:
         raise InvalidOptionError(f"arenas must be an integer in [1, {MAX_ARENAS}], got {arenas!r}")
+    if seed is not None:
+        integer = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
+        if not integer or not 0 <= int(seed) <= MAX_SEED - (arenas - 1):
+            raise InvalidOptionError(
+                f"seed must be an integer in [0, {MAX_SEED - (arenas - 1)}] (arena i is seeded "
+                f"seed + i), got {seed!r}"
+            )
 
 
 @dataclass(frozen=True)

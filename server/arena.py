@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.env_info import EnvInfo
-from neuronsmae.protocol.errors import ResetNeededError
+from neuronsmae.protocol.errors import InvalidOptionError, ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.contexts import EpisodeContext, check_seed, parse_contexts
@@ -55,8 +55,8 @@ class Arena(ArenaAPI):
     """
 
     def __init__(self, seed: int = 1234, **options: Any) -> None:
+        self.seed = check_seed(seed, InvalidOptionError)
         self.config = cfg = ArenaConfig.from_options(options)
-        self.seed = int(seed)
         self.rng = np.random.default_rng(self.seed)
         self.n_blue, self.n_red = cfg.n_blue, cfg.n_red
         self.n = cfg.n_blue + cfg.n_red

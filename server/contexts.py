@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import InvalidContextError
+from neuronsmae.protocol.errors import InvalidContextError, NeuronsMAEError
 from neuronsmae.protocol.levels import (
     DEFAULT_LEVEL,
     LEVEL_CHOICES,
@@ -185,12 +185,13 @@ MAX_SEED = 2**63 - 1
 """Largest reset seed (the wire's limit: a signed 64-bit integer)."""
 
 
-def check_seed(seed: Any) -> int:
-    """A reset seed as an int, or ``InvalidContextError`` saying what is valid."""
+def check_seed(seed: Any, error: type[NeuronsMAEError] = InvalidContextError) -> int:
+    """A seed as an int, or ``error`` (a reset's ``InvalidContextError`` by default; an
+    arena's constructor passes ``InvalidOptionError``) saying what is valid."""
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise InvalidContextError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
+        raise error(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
     if not 0 <= int(seed) <= MAX_SEED:
-        raise InvalidContextError(f"seed {int(seed)} is out of range; valid: [0, {MAX_SEED}]")
+        raise error(f"seed {int(seed)} is out of range; valid: [0, {MAX_SEED}]")
     return int(seed)
 
 

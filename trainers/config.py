@@ -39,6 +39,7 @@ from neuronsmae.trainers.config_groups import (
     EvalConfig,
     LearnerConfig,
     check_choice,
+    check_finite,
     check_positive,
     parse_resources,
 )
@@ -173,6 +174,7 @@ class TrainConfig:
                     f"cluster.{name} must be in [1, envs_per_worker={self.envs_per_worker}], "
                     f"got {getattr(self.cluster, name)}"
                 )
+        check_finite(self)
         if self.workers < 0 or self.max_minutes < 0:
             raise ConfigError(
                 f"workers and max_minutes must be ≥ 0, got {self.workers} and {self.max_minutes}"

@@ -8,6 +8,8 @@ groups, as the bare ``lr`` (:mod:`neuronsmae.trainers.config`).
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -38,6 +40,15 @@ def check_positive(owner: object, *names: str) -> None:
             raise ConfigError(f"{name} must be ≥ 1, got {getattr(owner, name)}")
 
 
+def check_finite(owner: object) -> None:
+    """Raise :class:`ConfigError` unless every float field of ``owner`` is a finite number
+    (NaN or infinity in a learning rate or a budget would pass every range check)."""
+    for f in dataclasses.fields(owner):  # type: ignore[arg-type]
+        value = getattr(owner, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"{f.name} must be a finite number, got {value}")
+
+
 def parse_resources(text: str) -> dict[str, float]:
     """``"sampler=1,big_node=0.5"`` → ``{"sampler": 1.0, "big_node": 0.5}`` ("" → {}).
 
@@ -50,7 +61,8 @@ def parse_resources(text: str) -> dict[str, float]:
             value = float(amount) if sep else 1.0
         except ValueError:
             raise ConfigError(f"resource {item!r}: expected name=amount") from None
-        if not name or value <= 0 or name in ("CPU", "GPU", "memory", "object_store_memory"):
+        reserved = name in ("CPU", "GPU", "memory", "object_store_memory")
+        if not name or reserved or not math.isfinite(value) or value <= 0:
             raise ConfigError(f"resource {item!r}: expected a custom name and an amount > 0")
         out[name] = value
     return out
@@ -78,7 +90,7 @@ class LearnerConfig:
     episodes). Measured: refreshing every 10 episodes (``--set target_update_interval=20``)
     kept the greedy win rate oscillating."""
     grad_clip: float = 10.0
-    """Gradient-norm clip (paper: 10)."""
+    """Largest gradient norm of an update, > 0; larger ones are scaled down to it (paper: 10)."""
     agent_hidden: int = 128
     """GRU width of the shared agent network (paper: 128)."""
     mixer_embed: int = 32
@@ -144,8 +156,10 @@ class LearnerConfig:
             self, "batch_size", "buffer_size", "train_every", "updates_per_round",
             "target_update_interval", "agent_hidden", "mixer_embed", "hypernet_hidden",
         )  # fmt: skip
-        if self.lr <= 0:
-            raise ConfigError(f"lr must be > 0, got {self.lr}")
+        check_finite(self)
+        for name in ("lr", "grad_clip"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in ("eps_start", "eps_end", "gamma", "td_lambda"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
@@ -271,5 +285,6 @@ class ClusterConfig:
             raise ConfigError(
                 f"base_port must be 0 (private servers) or a port, got {self.base_port}"
             )
+        check_finite(self)
         if self.worker_cpus <= 0:
             raise ConfigError(f"worker_cpus must be > 0, got {self.worker_cpus}")

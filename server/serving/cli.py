@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import logging
+import math
 import os
 import subprocess
 import sys
@@ -23,7 +24,7 @@ from collections.abc import Sequence
 import zenoh
 
 from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.protocol.messages import MAX_ARENAS
+from neuronsmae.protocol.messages import MAX_ARENAS, MAX_SEED
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
@@ -132,6 +133,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     return status
 
 
+def invalid_arguments(args: argparse.Namespace) -> list[str]:
+    """What is wrong with the parsed arguments, one message per argument naming what is
+    valid (empty when all are)."""
+    problems = []
+    if not 0 < args.port < 65536:
+        problems.append(f"--port must be in 1..65535, got {args.port}")
+    if not 0 <= args.seed <= MAX_SEED:
+        problems.append(f"--seed must be in 0..{MAX_SEED}, got {args.seed}")
+    if not 1 <= args.arenas <= MAX_ARENAS:
+        problems.append(f"--arenas must be in 1..{MAX_ARENAS}, got {args.arenas}")
+    if not (math.isfinite(args.time_scale) and args.time_scale >= 0):
+        problems.append(f"--time-scale must be a finite number >= 0, got {args.time_scale:g}")
+    if not (math.isfinite(args.lease) and args.lease > 0):
+        problems.append(f"--lease must be a finite number of seconds > 0, got {args.lease:g}")
+    if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
+        problems.append(
+            f"--busy-poll must be in 0..{MAX_BUSY_POLL_US:g} microseconds, got {args.busy_poll:g}"
+        )
+    return problems
+
+
 def run(argv: Sequence[str] | None = None) -> int:
     """Run the server until SIGTERM/SIGINT; return the process exit status."""
     args = _parser().parse_args(argv)
@@ -140,14 +162,10 @@ def run(argv: Sequence[str] | None = None) -> int:
         level=args.log_level,
         format="neuronsmae-server[%(process)d] %(levelname)s: %(message)s",
     )
-    if not 0 < args.port < 65536 or args.time_scale < 0:
-        log.error("--port must be in 1..65535 and --time-scale >= 0")
-        return 2
-    if not 1 <= args.arenas <= MAX_ARENAS:
-        log.error("--arenas must be in 1..%d", MAX_ARENAS)
-        return 2
-    if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
-        log.error("--busy-poll must be in 0..%g microseconds", MAX_BUSY_POLL_US)
+    problems = invalid_arguments(args)
+    if problems:
+        for problem in problems:
+            log.error("%s", problem)
         return 2
     if args.compile_only:
         warm_up(Arena)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import signal
 import subprocess
@@ -21,8 +22,9 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
-from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.protocol.launch import ServerCommand
+from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
+from neuronsmae.protocol.launch import ServerCommand, check_launch
+from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.server.serving.probe import Health, Probe
 from neuronsmae.server.serving.rpc import PortInUseError, check_port
 
@@ -51,6 +53,18 @@ class FleetSpec:
     arenas: int = 1
     """Arenas per server (``neuronsmae-server --arenas``); server i's arena j gets seed
     ``seed + i * arenas + j``, so the fleet's arenas have distinct consecutive seeds."""
+
+    def __post_init__(self) -> None:
+        check_launch(self.time_scale, 0.0, self.arenas, self.seed)
+        if self.seed + self.count * self.arenas - 1 > MAX_SEED:
+            raise InvalidOptionError(
+                f"seed {self.seed} + {self.count * self.arenas} arenas passes the largest seed, "
+                f"{MAX_SEED}"
+            )
+        if not (math.isfinite(self.lease) and self.lease > 0):
+            raise InvalidOptionError(
+                f"lease must be a finite number of seconds > 0, got {self.lease}"
+            )
 
     def ports(self) -> list[int]:
         return [self.base_port + i for i in range(self.count)]

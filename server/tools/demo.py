@@ -12,6 +12,7 @@ import time
 from collections.abc import Sequence
 
 from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
+from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.server.arena import Arena
 
 
@@ -22,6 +23,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--red", default="easy", choices=LEVEL_ARGS, help="red bot level")
     parser.add_argument("--seed", type=int, default=1234)
     args = parser.parse_args(argv)
+    if not 0 <= args.seed <= MAX_SEED:
+        parser.error(f"--seed must be in 0..{MAX_SEED}, got {args.seed}")
     blue_level = level_from_arg(args.blue)
     with Arena(seed=args.seed, mode="bots", blue_level=blue_level) as arena:
         arena.reset({"level": level_from_arg(args.red)})

@@ -1,14 +1,30 @@
-"""The benchmarks' CPU clocks: per thread, to the scheduler's precision."""
+"""The benchmarks' CPU clocks (per thread, to the scheduler's precision) and their argparse
+types."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import threading
 import time
+from collections.abc import Callable
 
 import psutil
+import pytest
 
-from bench.common import cpu_between, cpu_by_thread, cpu_snapshot
+from bench.common import (
+    MAX_ARENAS,
+    arena_count,
+    at_least,
+    between,
+    cpu_between,
+    cpu_by_thread,
+    cpu_snapshot,
+    finite,
+    non_negative,
+    positive,
+    tcp_port,
+)
 
 
 def _burn(seconds: float) -> None:
@@ -57,3 +73,72 @@ def test_a_thread_born_in_between_counts_from_zero_and_apart_from_main() -> None
     after = cpu_snapshot([me])
     assert (me.pid, worker.native_id) not in after
     assert 0.0 <= cpu_between(seen, after) < 0.05
+
+
+def test_at_least_refuses_counts_below_the_bound_by_name() -> None:
+    assert at_least(0)("0") == 0 and at_least(1)("8") == 8
+    with pytest.raises(argparse.ArgumentTypeError, match="must be at least 1, got 0"):
+        at_least(1)("0")
+    with pytest.raises(argparse.ArgumentTypeError, match="expected an integer, got 'x'"):
+        at_least(1)("x")
+
+
+def _refusal(parse: Callable[[str], object], text: str) -> str:
+    """The message ``parse`` refuses ``text`` with."""
+    with pytest.raises(argparse.ArgumentTypeError) as refused:
+        parse(text)
+    return str(refused.value)
+
+
+def test_between_takes_both_bounds_and_refuses_past_either_naming_them() -> None:
+    assert [between(0, 8)(t) for t in ("0", "8")] == [0, 8]
+    assert _refusal(between(0, 8), "-1") == "must be in [0, 8], got -1"
+    assert _refusal(between(0, 8), "9") == "must be in [0, 8], got 9"
+    assert _refusal(between(0, 8), "2.5") == "expected an integer, got '2.5'"
+
+
+def test_ports_and_arena_counts_have_their_protocol_bounds() -> None:
+    assert tcp_port("1") == 1 and tcp_port("65535") == 65535
+    assert _refusal(tcp_port, "0") == "must be in [1, 65535], got 0"
+    assert _refusal(tcp_port, "65536") == "must be in [1, 65535], got 65536"
+    assert arena_count("1") == 1 and arena_count(str(MAX_ARENAS)) == MAX_ARENAS
+    assert _refusal(arena_count, "0") == f"must be in [1, {MAX_ARENAS}], got 0"
+    too_many = MAX_ARENAS + 1
+    assert _refusal(arena_count, str(too_many)) == f"must be in [1, {MAX_ARENAS}], got {too_many}"
+
+
+def test_positive_refuses_zero_negatives_nan_and_infinities_naming_the_bound() -> None:
+    assert positive("0.25") == 0.25 and positive("3") == 3.0 and positive("1e-3") == 0.001
+    for text, shown in (("0", "0.0"), ("-2", "-2.0"), ("nan", "nan"), ("inf", "inf")):
+        assert _refusal(positive, text) == f"must be a finite number above 0, got {shown}"
+    assert _refusal(positive, "soon") == "expected a number, got 'soon'"
+
+
+def test_non_negative_takes_zero_and_refuses_below_it_or_unbounded() -> None:
+    assert non_negative("0") == 0.0 and non_negative("30") == 30.0
+    for text in ("-0.5", "-inf", "inf", "nan"):
+        want = f"must be a finite number of at least 0, got {float(text)}"
+        assert _refusal(non_negative, text) == want
+
+
+def test_finite_with_a_maximum_names_the_whole_range() -> None:
+    closed, half_open = finite(0.0, 100.0), finite(0.0, 100.0, above=True)
+    assert closed("0") == 0.0 and closed("100") == 100.0 and half_open("100") == 100.0
+    assert _refusal(closed, "100.5") == "must be a finite number in [0, 100], got 100.5"
+    assert _refusal(half_open, "0") == "must be a finite number in (0, 100], got 0.0"
+
+
+def test_a_parser_refuses_a_bad_list_item_naming_the_argument(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    parser = argparse.ArgumentParser(prog="bench")
+    parser.add_argument("--envs", type=arena_count, nargs="+", default=[1, 8])
+    parser.add_argument("--seconds", type=positive, default=3.0)
+    assert parser.parse_args(["--envs", "1", str(MAX_ARENAS)]).envs == [1, MAX_ARENAS]
+    with pytest.raises(SystemExit) as exit_:
+        parser.parse_args(["--envs", "4", "0"])
+    assert exit_.value.code == 2
+    assert f"argument --envs: must be in [1, {MAX_ARENAS}], got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--seconds", "0"])
+    assert "argument --seconds: must be a finite number above 0, got 0.0" in capsys.readouterr().err

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from neuronsmae.client import RM, context_table, ping
+from neuronsmae.client import RM, VecRM, context_table, ping
 from neuronsmae.protocol import launch
 from neuronsmae.protocol.errors import (
     ERRORS,
@@ -138,13 +138,19 @@ def test_a_busy_polling_server_plays_the_same_and_stops_promptly(
             "busy_poll_us must be in [0, 100000] microseconds, got 1000000000.0",
         ),
         ({"busy_poll_us": float("nan")}, "busy_poll_us must be in [0, 100000] microseconds"),
-        ({"time_scale": -1.0}, "time_scale must be >= 0 (0 = unlimited), got -1.0"),
+        ({"time_scale": -1.0}, "time_scale must be a finite number >= 0 (0 = unlimited)"),
+        ({"time_scale": float("inf")}, "time_scale must be a finite number >= 0"),
+        ({"seed": -1}, "seed must be an integer in [0, 9223372036854775807]"),
+        ({"seed": 1.5}, "seed must be an integer in [0, 9223372036854775807]"),
     ],
 )
 def test_bad_launch_settings_are_refused_before_anything_starts(
     kwargs: dict[str, float], message: str
 ) -> None:
     port = free_port()
+    with pytest.raises(InvalidOptionError) as caught:
+        VecRM(port=port, num_envs=2, **kwargs)
+    assert message in str(caught.value)
     with pytest.raises(InvalidOptionError) as caught:
         RM(port=port, **kwargs)
     assert message in str(caught.value)

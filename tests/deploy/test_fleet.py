@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from neuronsmae.protocol.launch import ServerCommand
+from neuronsmae.server.serving import fleet as fleet_cli
 from neuronsmae.server.serving.fleet import main, read_state, status
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec, FleetStartError, Member
 
@@ -131,6 +132,32 @@ def test_bad_count_is_a_usage_error() -> None:
     with pytest.raises(SystemExit) as exc:
         main(["--count", "0"])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seed", "-1"], "seed must be an integer in [0, 9223372036854775807]"),
+        (["--seed", str(2**63 - 3), "--count", "2", "--arenas", "2"], "passes the largest seed"),
+        (["--lease", "nan"], "lease must be a finite number of seconds > 0, got nan"),
+        (["--time-scale", "-2"], "time_scale must be a finite number >= 0"),
+        (["--arenas", "65"], "arenas must be an integer in [1, 64], got 65"),
+    ],
+)
+def test_bad_server_settings_are_usage_errors_before_any_server_starts(
+    argv: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def no_fleet(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a fleet was started")
+
+    monkeypatch.setattr(fleet_cli, "Fleet", no_fleet)
+    with pytest.raises(SystemExit) as exc:
+        main(["--base-port", str(free_ports()), *argv])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"servers": 3}', '"x"'])

@@ -216,6 +216,12 @@ def test_bad_options_list_valid_ones() -> None:
         Arena(seed=1, action_space="teleport")
 
 
+@pytest.mark.parametrize("seed", [-1, 2**63, 1.5, True, "7"])
+def test_a_bad_seed_is_an_option_error_naming_the_range(seed: object) -> None:
+    with pytest.raises(InvalidOptionError, match=r"seed .*\[0, 9223372036854775807\]"):
+        Arena(seed=seed)  # type: ignore[arg-type]
+
+
 def test_random_spawns_follow_released_rule() -> None:
     a = Arena(seed=3)
     for s in range(30):

@@ -113,6 +113,13 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         ),
         (["servers_per_worker=2", "base_port=12000"], "needs private servers"),
         (["servers_per_worker=2", "servers=actors"], "needs private servers"),
+        (["lr=nan"], "lr must be a finite number, got nan"),
+        (["max_minutes=nan"], "max_minutes must be a finite number, got nan"),
+        (["max_minutes=inf"], "max_minutes must be a finite number, got inf"),
+        (["worker_cpus=nan"], "worker_cpus must be a finite number, got nan"),
+        (["grad_clip=0"], "grad_clip must be > 0, got 0.0"),
+        (["gamma=nan"], "gamma must be a finite number, got nan"),
+        (["worker_resources=big=nan"], "expected a custom name and an amount > 0"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:

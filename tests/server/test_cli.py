@@ -1,0 +1,44 @@
+"""``neuronsmae-server``'s arguments: each bad one is refused before anything starts, with a
+message that names it and what is valid."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from neuronsmae.server.serving import cli
+
+
+def test_defaults_are_valid() -> None:
+    assert cli.invalid_arguments(cli._parser().parse_args([])) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--port", "0"], "--port must be in 1..65535, got 0"),
+        (["--port", "65536"], "--port must be in 1..65535, got 65536"),
+        (["--seed", "-1"], "--seed must be in 0..9223372036854775807, got -1"),
+        (["--seed", str(2**63)], "--seed must be in 0..9223372036854775807"),
+        (["--arenas", "0"], "--arenas must be in 1..64, got 0"),
+        (["--arenas", "65"], "--arenas must be in 1..64, got 65"),
+        (["--time-scale", "-1"], "--time-scale must be a finite number >= 0, got -1"),
+        (["--time-scale", "nan"], "--time-scale must be a finite number >= 0, got nan"),
+        (["--lease", "0"], "--lease must be a finite number of seconds > 0, got 0"),
+        (["--lease", "inf"], "--lease must be a finite number of seconds > 0, got inf"),
+        (["--busy-poll", "-5"], "--busy-poll must be in 0..100000 microseconds, got -5"),
+    ],
+)
+def test_bad_argument_is_refused_by_name(
+    argv: list[str], message: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.ERROR, logger="neuronsmae.server"):
+        assert cli.run(argv) == 2
+    assert any(message in r.getMessage() for r in caplog.records), caplog.text
+
+
+def test_every_problem_is_reported_at_once() -> None:
+    args = cli._parser().parse_args(["--port", "0", "--arenas", "99", "--lease", "-1"])
+    problems = cli.invalid_arguments(args)
+    assert [p.split()[0] for p in problems] == ["--port", "--arenas", "--lease"]
