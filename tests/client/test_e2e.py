@@ -434,18 +434,17 @@ sys.stdin.read()  # wait to be killed
 @pytest.mark.slow
 def test_launched_server_exits_when_its_client_is_killed() -> None:
     port = free_port()
-    client = subprocess.Popen(
+    with subprocess.Popen(  # leaving closes the pipes and waits
         [sys.executable, "-c", ORPHAN, str(port)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        server_pid = int(client.stdout.readline())  # type: ignore[union-attr]
-        assert ping(port)["owned"] is True
-    finally:
-        client.kill()  # no close(): the server must notice on its own
-        client.wait()
+    ) as client:
+        try:
+            server_pid = int(client.stdout.readline())  # type: ignore[union-attr]
+            assert ping(port)["owned"] is True
+        finally:
+            client.kill()  # no close(): the server must notice on its own
     deadline = time.monotonic() + 5.0
     while _alive(server_pid):
         assert time.monotonic() < deadline, "the launched server outlived its client"
