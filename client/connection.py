@@ -15,6 +15,8 @@ server through a :class:`Connection`:
 
 from __future__ import annotations
 
+import math
+import numbers
 import uuid
 import weakref
 from collections.abc import Callable
@@ -34,6 +36,7 @@ from neuronsmae.protocol.launch import (
     ServerProcess,
     is_local,
     launch_private,
+    ports_of,
 )
 from neuronsmae.protocol.link import Link, Pending
 from neuronsmae.protocol.messages import (
@@ -118,6 +121,13 @@ class Connection:
         launch: bool = True,
         timeout: float = 10.0,
     ) -> None:
+        if port is not None:
+            ports_of(port)  # one port in 1..65535, or InvalidOptionError
+        number = isinstance(timeout, numbers.Real) and not isinstance(timeout, bool)
+        if not (number and math.isfinite(timeout) and timeout > 0):
+            raise InvalidOptionError(
+                f"timeout must be a finite number of seconds > 0, got {timeout!r}"
+            )
         self.host, self.router, self.timeout = host, router, float(timeout)
         self.session_id = uuid.uuid4().hex
         self.server: ServerProcess | None = None

@@ -142,6 +142,8 @@ def test_a_busy_polling_server_plays_the_same_and_stops_promptly(
         ({"time_scale": float("inf")}, "time_scale must be a finite number >= 0"),
         ({"seed": -1}, "seed must be an integer in [0, 9223372036854775807]"),
         ({"seed": 1.5}, "seed must be an integer in [0, 9223372036854775807]"),
+        ({"timeout": 0}, "timeout must be a finite number of seconds > 0, got 0"),
+        ({"timeout": float("nan")}, "timeout must be a finite number of seconds > 0, got nan"),
     ],
 )
 def test_bad_launch_settings_are_refused_before_anything_starts(
@@ -156,6 +158,14 @@ def test_bad_launch_settings_are_refused_before_anything_starts(
     assert message in str(caught.value)
     with pytest.raises(ServerUnavailableError):  # nothing was launched
         ping(port, timeout=0.5)
+
+
+@pytest.mark.parametrize("port", [0, 65536, True, "10000"])
+def test_a_bad_port_is_refused_before_anything_starts(port: object) -> None:
+    with pytest.raises(InvalidOptionError, match=r"port must be an integer in 1\.\.65535"):
+        RM(port=port)  # type: ignore[arg-type]
+    with pytest.raises(InvalidOptionError, match=r"port must be an integer in 1\.\.65535"):
+        VecRM(port=port, num_envs=2)  # type: ignore[arg-type]
 
 
 @pytest.mark.slow
