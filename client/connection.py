@@ -15,8 +15,6 @@ server through a :class:`Connection`:
 
 from __future__ import annotations
 
-import math
-import numbers
 import uuid
 import weakref
 from collections.abc import Callable
@@ -34,6 +32,7 @@ from neuronsmae.protocol.launch import (
     PORT_IN_USE_STATUS,
     ServerCommand,
     ServerProcess,
+    check_timeout,
     is_local,
     launch_private,
     ports_of,
@@ -123,11 +122,7 @@ class Connection:
     ) -> None:
         if port is not None:
             ports_of(port)  # one port in 1..65535, or InvalidOptionError
-        number = isinstance(timeout, numbers.Real) and not isinstance(timeout, bool)
-        if not (number and math.isfinite(timeout) and timeout > 0):
-            raise InvalidOptionError(
-                f"timeout must be a finite number of seconds > 0, got {timeout!r}"
-            )
+        check_timeout(timeout)
         self.host, self.router, self.timeout = host, router, float(timeout)
         self.session_id = uuid.uuid4().hex
         self.server: ServerProcess | None = None

@@ -22,7 +22,7 @@ from neuronsmae.protocol.errors import (
     error_from_code,
 )
 from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
-from neuronsmae.protocol.launch import ServerCommand, check_launch
+from neuronsmae.protocol.launch import ServerCommand, check_launch, check_timeout, ports_of
 from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import (
     Configure,
@@ -182,6 +182,8 @@ def _copy(value: Any) -> Any:
 
 
 def _query(body: Message, port: int, host: str, timeout: float) -> Any:
+    ports_of(port)
+    check_timeout(timeout)
     link = Link(host, port)
     try:
         reply = decode_reply(link.call(encode_request(body), timeout))

@@ -166,6 +166,16 @@ def test_a_bad_port_is_refused_before_anything_starts(port: object) -> None:
         RM(port=port)  # type: ignore[arg-type]
     with pytest.raises(InvalidOptionError, match=r"port must be an integer in 1\.\.65535"):
         VecRM(port=port, num_envs=2)  # type: ignore[arg-type]
+    with pytest.raises(InvalidOptionError, match=r"port must be an integer in 1\.\.65535"):
+        ping(port)  # type: ignore[arg-type]
+    with pytest.raises(InvalidOptionError, match=r"port must be an integer in 1\.\.65535"):
+        context_table(port)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("timeout", [0, -1.0, float("inf"), "2"])
+def test_a_query_without_a_finite_positive_timeout_is_refused(timeout: object) -> None:
+    with pytest.raises(InvalidOptionError, match="timeout must be a finite number of seconds"):
+        ping(free_port(), timeout=timeout)  # type: ignore[arg-type]
 
 
 @pytest.mark.slow
