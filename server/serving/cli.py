@@ -139,8 +139,9 @@ def invalid_arguments(args: argparse.Namespace) -> list[str]:
     problems = []
     if not 0 < args.port < 65536:
         problems.append(f"--port must be in 1..65535, got {args.port}")
-    if not 0 <= args.seed <= MAX_SEED:
-        problems.append(f"--seed must be in 0..{MAX_SEED}, got {args.seed}")
+    top = MAX_SEED - max(args.arenas, 1) + 1  # arena i is seeded seed + i
+    if not 0 <= args.seed <= top:
+        problems.append(f"--seed must be in 0..{top} (arena i is seeded seed + i), got {args.seed}")
     if not 1 <= args.arenas <= MAX_ARENAS:
         problems.append(f"--arenas must be in 1..{MAX_ARENAS}, got {args.arenas}")
     if not (math.isfinite(args.time_scale) and args.time_scale >= 0):

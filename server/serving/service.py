@@ -43,6 +43,7 @@ from neuronsmae.protocol.errors import (
 )
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.messages import (
+    MAX_SEED,
     PROTOCOL_VERSION,
     Close,
     Configure,
@@ -284,6 +285,11 @@ class ArenaService:
                 "or a server started with the count it needs"
             )
         seed = self._default_seed if body.seed is None else body.seed
+        if seed + self.arenas - 1 > MAX_SEED:
+            raise InvalidOptionError(
+                f"seed {seed} is out of range for {self.arenas} arenas (arena i is seeded "
+                f"seed + i); valid: [0, {MAX_SEED - self.arenas + 1}]"
+            )
         key = _options_key(body.options)
         built = self._built
         rebuilt = (

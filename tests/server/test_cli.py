@@ -19,8 +19,12 @@ def test_defaults_are_valid() -> None:
     [
         (["--port", "0"], "--port must be in 1..65535, got 0"),
         (["--port", "65536"], "--port must be in 1..65535, got 65536"),
-        (["--seed", "-1"], "--seed must be in 0..9223372036854775807, got -1"),
+        (
+            ["--seed", "-1"],
+            "--seed must be in 0..9223372036854775807 (arena i is seeded seed + i), got -1",
+        ),
         (["--seed", str(2**63)], "--seed must be in 0..9223372036854775807"),
+        (["--seed", str(2**63 - 2), "--arenas", "4"], "--seed must be in 0..9223372036854775804"),
         (["--arenas", "0"], "--arenas must be in 1..64, got 0"),
         (["--arenas", "65"], "--arenas must be in 1..64, got 65"),
         (["--time-scale", "-1"], "--time-scale must be a finite number >= 0, got -1"),

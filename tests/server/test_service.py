@@ -178,6 +178,8 @@ def test_a_rebuild_frees_the_old_arenas_before_building_and_survives_a_failed_bu
         events.clear()
         assert code(svc, Configure(seed=7, arenas=2, options={"warp": 9}), "f") == "invalid_option"
         assert events == []  # a refused option frees nothing: the episode goes on
+        assert code(svc, Configure(seed=2**63 - 1, arenas=2), "f") == "invalid_option"
+        assert events == []  # nor does a seed whose last arena would pass 2**63 - 1
         events.clear()
         assert code(svc, Configure(seed=666, arenas=2), "f") == "server_error"
         # The failed build left the old seed's arenas, built again, serving.
