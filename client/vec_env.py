@@ -111,10 +111,10 @@ class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 "options['reset_mask']: the arenas reset together (or by autoreset); valid "
                 "options: ['contexts']"
             )
+        contexts = {**self.contexts, **dict(options.get("contexts") or {})}
+        obs = self.vec.reset(contexts or None, self._first_seed(seed))  # checks the seed
         if isinstance(seed, (int, np.integer)):
             self._np_random, self._np_random_seed = np.random.default_rng(int(seed)), int(seed)
-        contexts = {**self.contexts, **dict(options.get("contexts") or {})}
-        obs = self.vec.reset(contexts or None, self._first_seed(seed))
         self._ended[:] = False
         self.arena_infos = [{} for _ in range(self.num_envs)]
         state = self.vec.get_state()

@@ -13,7 +13,11 @@ from gymnasium.vector import AutoresetMode
 
 from neuronsmae.client import CoopEnv, CoopVectorEnv
 from neuronsmae.client.gym_env import ENV_ID
-from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
+from neuronsmae.protocol.errors import (
+    InvalidActionError,
+    InvalidContextError,
+    InvalidOptionError,
+)
 from neuronsmae.server import VecArena
 
 SHORT = {"episode_steps": 200}
@@ -129,6 +133,8 @@ def test_arguments_are_checked() -> None:
             vec.step(np.zeros((3, 2), dtype=np.int64))
         with pytest.raises(InvalidOptionError, match="reset_mask"):
             vec.reset(options={"reset_mask": np.array([True, False])})
+        with pytest.raises(InvalidContextError, match="seed -5 is out of range"):
+            vec.reset(seed=-5)
     finally:
         vec.close()
     with pytest.raises(InvalidOptionError, match="render"):
