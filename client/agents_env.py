@@ -50,8 +50,8 @@ from gymnasium import spaces
 from neuronsmae.client.gym_env import AGENTS_ENV_ID, EpisodeSpec
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
+from neuronsmae.client.spaces import per_agent_actions
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
-from neuronsmae.protocol.errors import InvalidActionError
 
 
 class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Sequence[Any]]):
@@ -111,14 +111,8 @@ class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Seque
     def step(
         self, actions: Sequence[Any]
     ) -> tuple[tuple[np.ndarray, ...], list[float], bool, bool, dict[str, Any]]:
-        if len(actions) != self.n_agents:
-            raise InvalidActionError(
-                f"expected {self.n_agents} actions (one per agent), got {len(actions)}"
-            )
-        joint = [
-            self.layout.to_arena(name, a if self.layout.continuous else int(a))
-            for name, a in zip(self.agents, actions, strict=True)
-        ]
+        rows = per_agent_actions(actions, self.n_agents, not self.layout.continuous)
+        joint = [self.layout.to_arena(name, a) for name, a in zip(self.agents, rows, strict=True)]
         obs, rewards, done, raw = self.arena.step(joint)
         terminated = bool(done) and self.layout.annihilated(raw)
         truncated = bool(done) and not terminated

@@ -84,6 +84,11 @@ class Recorder(ArenaWrapper):
             options = opts if options is None else options
         self.env = env
         self.out_dir = Path(out_dir)
+        if self.out_dir.exists() and not self.out_dir.is_dir():
+            raise InvalidOptionError(
+                f"out_dir {str(out_dir)!r} exists and is not a directory; recordings go into a "
+                "directory (created on the first recorded episode if missing)"
+            )
         self.seed = int(arena_seed)
         self.options = to_plain(dict(options))
         self.meta = to_plain(dict(meta or {}))

@@ -44,9 +44,9 @@ import numpy as np
 from neuronsmae.client.gym_env import _coop
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import Layout
+from neuronsmae.client.spaces import Layout, per_agent_actions
 from neuronsmae.client.viewer import Renderer
-from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
+from neuronsmae.protocol.errors import InvalidOptionError
 
 
 def _smac(layout: Layout) -> None:
@@ -107,18 +107,7 @@ class SMACEnv(Recipe):
 
     def step(self, actions: Sequence[Any]) -> tuple[float, bool, dict[str, Any]]:
         """One decision; returns ``(reward, terminated, info)``."""
-        if len(actions) != self.n_agents:
-            raise InvalidActionError(
-                f"expected {self.n_agents} actions (one per agent), got {len(actions)}"
-            )
-        joint = []
-        for i, a in enumerate(actions):
-            try:
-                joint.append(int(a))
-            except (TypeError, ValueError) as exc:
-                raise InvalidActionError(
-                    f"agent {i}: an action is an integer (anything int() accepts), got {a!r}"
-                ) from exc
+        joint = per_agent_actions(actions, self.n_agents)
         _, rewards, done, raw = self.arena.step(joint)
         terminated = bool(done)
         timeout = terminated and not self.layout.annihilated(raw)
@@ -139,7 +128,7 @@ class SMACEnv(Recipe):
         return [np.asarray(o, dtype=np.float32) for o in self.arena.get_obs()]
 
     def get_obs_agent(self, agent_id: int) -> np.ndarray:
-        return self.get_obs()[agent_id]
+        return self.get_obs()[self._agent(agent_id)]
 
     def get_obs_size(self) -> int:
         return self.layout.obs_dim
@@ -154,7 +143,17 @@ class SMACEnv(Recipe):
         return [np.asarray(m, dtype=np.int64).tolist() for m in self.arena.get_avail_actions()]
 
     def get_avail_agent_actions(self, agent_id: int) -> list[int]:
-        return self.get_avail_actions()[agent_id]
+        return self.get_avail_actions()[self._agent(agent_id)]
+
+    def _agent(self, agent_id: Any) -> int:
+        """``agent_id`` checked: an integer in [0, n_agents) (an ``IndexError`` otherwise, as
+        a list would raise, but naming the range; negative ids are refused, not wrapped)."""
+        ok = isinstance(agent_id, (int, np.integer)) and not isinstance(agent_id, bool)
+        if not ok or not 0 <= int(agent_id) < self.n_agents:
+            raise IndexError(
+                f"agent_id must be an integer in [0, {self.n_agents - 1}], got {agent_id!r}"
+            )
+        return int(agent_id)
 
     def get_total_actions(self) -> int:
         return self.layout.n_actions

@@ -220,3 +220,28 @@ class Layout:
         step still counts as terminal."""
         blue, red = self.team_split(list(info["alive"]))
         return not any(blue) or not any(red)
+
+
+def per_agent_actions(actions: Any, n_agents: int, discrete: bool = True) -> list[Any]:
+    """One action per agent from a sequence of ``n_agents``; discrete ones as ``int()`` of
+    each (Python or numpy integers, 0-d or one-element tensors). ``InvalidActionError``
+    names what is wrong and which agent."""
+    try:
+        count = len(actions)
+    except TypeError:
+        raise InvalidActionError(
+            f"actions must be a sequence of {n_agents} (one per agent), got {actions!r:.80}"
+        ) from None
+    if count != n_agents:
+        raise InvalidActionError(f"expected {n_agents} actions (one per agent), got {count}")
+    if not discrete:
+        return list(actions)
+    out = []
+    for i, a in enumerate(actions):
+        try:
+            out.append(int(a))
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InvalidActionError(
+                f"agent {i}: an action is an integer (anything int() accepts), got {a!r:.80}"
+            ) from exc
+    return out

@@ -212,6 +212,10 @@ def test_actions_are_checked(make: Callable[..., gymnasium.Env[Any, Any]]) -> No
         env.step([0])
     with pytest.raises(InvalidActionError, match=r"agent 1: .*valid: \[0, 7\]"):
         env.step([0, 99])
+    with pytest.raises(InvalidActionError, match="agent 0: an action is an integer"):
+        env.step([float("nan"), 0])
+    with pytest.raises(InvalidActionError, match=r"a sequence of 2 .* got 3"):
+        env.step(3)  # type: ignore[arg-type]
     unwrapped = env.unwrapped
     masks = unwrapped.get_avail_actions()  # type: ignore[attr-defined]
     assert [m.shape for m in masks] == [(unwrapped.layout.n_actions,)] * 2  # type: ignore[attr-defined]

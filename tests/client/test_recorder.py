@@ -86,6 +86,13 @@ def test_an_arena_it_cannot_rebuild_must_be_described(tmp_path: Path) -> None:
     Recorder(Opaque(), tmp_path, arena_seed=0, options={}).close()  # type: ignore[arg-type]
 
 
+def test_out_dir_must_be_a_directory(tmp_path: Path) -> None:
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a directory")
+    with pytest.raises(InvalidOptionError, match="exists and is not a directory"):
+        Recorder(Arena(seed=0), a_file)
+
+
 @pytest.mark.slow
 def test_episode_recorded_through_rm_replays_in_process(tmp_path: Path) -> None:
     # A launched server with graphics "on": the arena renders headless either way, and the

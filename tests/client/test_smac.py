@@ -147,6 +147,15 @@ def test_actions_accept_anything_int_takes_and_refuse_the_rest(
         env.step([0, "left"])
     with pytest.raises(InvalidActionError, match="expected 2 actions"):
         env.step([0])
+    with pytest.raises(InvalidActionError, match="agent 0: an action is an integer"):
+        env.step([float("nan"), 0])
+    with pytest.raises(InvalidActionError, match=r"a sequence of 2 .* got None"):
+        env.step(None)  # type: ignore[arg-type]
+    for bad in (-1, 2, 1.0, True):
+        with pytest.raises(IndexError, match=r"agent_id must be an integer in \[0, 1\]"):
+            env.get_obs_agent(bad)  # type: ignore[arg-type]
+        with pytest.raises(IndexError, match=r"agent_id must be an integer in \[0, 1\]"):
+            env.get_avail_agent_actions(bad)  # type: ignore[arg-type]
 
 
 def test_seeded_runs_repeat_and_unseeded_ones_differ(make: Callable[..., SMACEnv]) -> None:
