@@ -111,7 +111,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         if not saved.is_file():
             raise ConfigError(f"--resume: no {saved}; pass the run's --out")
         base = make_config(json.loads(saved.read_text()))
-    return make_config(*layers, base=base)
+    cfg = make_config(*layers, base=base)
+    if cfg.run_dir.exists() and not cfg.run_dir.is_dir():
+        raise ConfigError(f"out {str(cfg.run_dir)!r} exists and is not a directory")
+    return cfg
 
 
 def print_config_help() -> None:

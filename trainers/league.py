@@ -194,7 +194,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.arenas < 1 or (args.servers is not None and args.servers < 1):
+        parser.error(f"--arenas and --servers must be at least 1, got {args.arenas} and "
+                     f"{args.servers}")  # fmt: skip
     bots = [b.strip() for b in args.bots.split(",") if b.strip()]
     try:
         players = expand(args.entries, bots)

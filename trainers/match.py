@@ -184,10 +184,12 @@ def play(
     """Play ``episodes`` and return the rates with 95% intervals and each episode's
     ``winners`` in episode order (see the module docstring for the sides and where they
     play)."""
-    if episodes < 1:
-        raise InvalidOptionError(f"episodes must be at least 1, got {episodes}")
+    if episodes < 1 or arenas < 1:
+        raise InvalidOptionError(
+            f"episodes and arenas must be at least 1, got {episodes} and {arenas}"
+        )
     setup = arrange(Side.of(blue, "--blue"), Side.of(red, "--red"), options)
-    k = max(1, min(arenas, episodes))
+    k = min(arenas, episodes)
     env = open_arenas(seed, k, setup.options, port, servers)
     try:
         winners, first = _play(env, setup, episodes, seed, k, record, gif is not None)

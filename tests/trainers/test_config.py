@@ -167,6 +167,15 @@ def test_the_saved_config_is_nested_and_reads_back(tmp_path: Path) -> None:
     assert make_config(saved) == cfg
 
 
+def test_an_out_that_is_a_file_is_refused_before_training(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    assert main(["--out", str(taken), "--episodes", "1"]) == 2
+    assert "exists and is not a directory" in capsys.readouterr().err
+
+
 def test_cli_layers_flags_win_over_set_and_file(tmp_path: Path) -> None:
     f = tmp_path / "c.json"
     f.write_text(json.dumps({"alg": "iql", "lr": 0.002, "seed": 4}))

@@ -63,3 +63,13 @@ def test_a_league_of_three_policies_rates_them_and_draws_the_matrix(tmp_path: Pa
     assert "| 1 |" in (out / "league.md").read_text()
     with Image.open(out / "league.png") as picture:
         assert picture.size[0] > 200 and picture.size[1] > 200
+
+
+@pytest.mark.parametrize("argv", [["--arenas", "0"], ["--servers", "0"]])
+def test_zero_arenas_or_servers_is_a_usage_error(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert "--arenas and --servers must be at least 1" in capsys.readouterr().err

@@ -43,6 +43,11 @@ def test_bot_levels_on_both_sides_from_the_command_line(capsys: pytest.CaptureFi
     assert "'2' is neither a bot level (0, 1, easy" in capsys.readouterr().err
 
 
+def test_play_refuses_zero_arenas_instead_of_playing_one() -> None:
+    with pytest.raises(InvalidOptionError, match="arenas must be at least 1, got 2 and 0"):
+        M.play("easy", "easy", 2, 0, arenas=0)
+
+
 def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
     with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
         M.play("easy", "nowhere.pt", 1, 0)
