@@ -30,7 +30,7 @@ from typing import IO, Any
 import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
-from neuronsmae.protocol.messages import MAX_ARENAS, MAX_SEED
+from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 
 STARTUP_TIMEOUT = 120.0
@@ -77,10 +77,10 @@ def check_launch(
         raise InvalidOptionError(f"arenas must be an integer in [1, {MAX_ARENAS}], got {arenas!r}")
     if seed is not None:
         integer = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
-        if not integer or not 0 <= int(seed) <= MAX_SEED - (arenas - 1):
+        top = max_first_seed(arenas)
+        if not integer or not 0 <= int(seed) <= top:
             raise InvalidOptionError(
-                f"seed must be an integer in [0, {MAX_SEED - (arenas - 1)}] (arena i is seeded "
-                f"seed + i), got {seed!r}"
+                f"seed must be an integer in [0, {top}] (arena i is seeded seed + i), got {seed!r}"
             )
 
 

@@ -59,6 +59,12 @@ MAX_ARENAS = 64
 """Most arenas one server may hold (``neuronsmae-server --arenas``)."""
 
 
+def max_first_seed(arenas: int) -> int:
+    """Largest seed of arena 0 when ``arenas`` arenas take ``seed, seed + 1, ...``: the last
+    one must stay within :data:`MAX_SEED`."""
+    return MAX_SEED - (arenas - 1)
+
+
 def rpc_key(port: int) -> str:
     """The key expression a server on ``port`` serves; the port in it keeps servers apart."""
     return f"neuronsmae/{port}/rpc"

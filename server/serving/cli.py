@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import zenoh
 
 from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.protocol.messages import MAX_ARENAS, MAX_SEED
+from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
@@ -139,7 +139,7 @@ def invalid_arguments(args: argparse.Namespace) -> list[str]:
     problems = []
     if not 0 < args.port < 65536:
         problems.append(f"--port must be in 1..65535, got {args.port}")
-    top = MAX_SEED - max(args.arenas, 1) + 1  # arena i is seeded seed + i
+    top = max_first_seed(max(args.arenas, 1))
     if not 0 <= args.seed <= top:
         problems.append(f"--seed must be in 0..{top} (arena i is seeded seed + i), got {args.seed}")
     if not 1 <= args.arenas <= MAX_ARENAS:

@@ -43,7 +43,6 @@ from neuronsmae.protocol.errors import (
 )
 from neuronsmae.protocol.interface import ArenaAPI
 from neuronsmae.protocol.messages import (
-    MAX_SEED,
     PROTOCOL_VERSION,
     Close,
     Configure,
@@ -64,6 +63,7 @@ from neuronsmae.protocol.messages import (
     VStep,
     decode_request,
     encode_reply,
+    max_first_seed,
 )
 from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.vec import VecArena
@@ -285,10 +285,10 @@ class ArenaService:
                 "or a server started with the count it needs"
             )
         seed = self._default_seed if body.seed is None else body.seed
-        if seed + self.arenas - 1 > MAX_SEED:
+        if seed > max_first_seed(self.arenas):
             raise InvalidOptionError(
                 f"seed {seed} is out of range for {self.arenas} arenas (arena i is seeded "
-                f"seed + i); valid: [0, {MAX_SEED - self.arenas + 1}]"
+                f"seed + i); valid: [0, {max_first_seed(self.arenas)}]"
             )
         key = _options_key(body.options)
         built = self._built

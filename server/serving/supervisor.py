@@ -24,7 +24,7 @@ from typing import IO
 
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.launch import ServerCommand, check_launch
-from neuronsmae.protocol.messages import MAX_SEED
+from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
 from neuronsmae.server.serving.probe import Health, Probe
 from neuronsmae.server.serving.rpc import PortInUseError, check_port
 
@@ -56,7 +56,7 @@ class FleetSpec:
 
     def __post_init__(self) -> None:
         check_launch(self.time_scale, 0.0, self.arenas, self.seed)
-        if self.seed + self.count * self.arenas - 1 > MAX_SEED:
+        if self.seed > max_first_seed(self.count * self.arenas):
             raise InvalidOptionError(
                 f"seed {self.seed} + {self.count * self.arenas} arenas passes the largest seed, "
                 f"{MAX_SEED}"
