@@ -27,12 +27,20 @@ import numpy as np
 
 from neuronsmae.protocol.errors import (
     InvalidActionError,
+    InvalidOptionError,
     NeuronsMAEError,
     ReplayMismatchError,
 )
 from neuronsmae.protocol.recording import Recording, decision_hash, read_recording
 from neuronsmae.server.arena import Arena
-from neuronsmae.server.tools.video import DEFAULT_FPS, check_writable, write_video
+from neuronsmae.server.tools.video import (
+    DEFAULT_FPS,
+    FPS_RANGE,
+    SCALE_RANGE,
+    check_video_options,
+    check_writable,
+    write_video,
+)
 
 
 @dataclass
@@ -108,10 +116,16 @@ def _parser() -> argparse.ArgumentParser:
         "--fps",
         type=float,
         default=DEFAULT_FPS,
-        help=f"video frames per second ({DEFAULT_FPS:g}: twice real time)",
+        help=f"video frames per second, in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}] "
+        f"({DEFAULT_FPS:g}: twice real time)",
     )
-    p.add_argument("--every", type=int, default=1, help="keep every n-th frame (1)")
-    p.add_argument("--scale", type=float, default=1.0, help="resize frames by this factor (1)")
+    p.add_argument("--every", type=int, default=1, help="keep every n-th frame, n ≥ 1 (1)")
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=1.0,
+        help=f"resize frames by this factor, in [{SCALE_RANGE[0]:g}, {SCALE_RANGE[1]:g}] (1)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
@@ -139,8 +153,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point; returns the exit status."""
     parser = _parser()
     args = parser.parse_args(argv)
-    if args.fps <= 0:
-        parser.error("--fps must be positive")
+    try:  # refused before the replay, video or not, so a bad flag never waits for one
+        check_video_options(args.fps, args.every, args.scale)
+    except InvalidOptionError as exc:
+        parser.error(f"--{str(exc).replace('; ', '; --')}")
     try:
         summary = run(args)
     except ReplayMismatchError as exc:

@@ -18,13 +18,32 @@ from neuronsmae.protocol.errors import InvalidOptionError, MissingDependencyErro
 
 DEFAULT_FPS = 5.0
 """Frames per second: one frame per 0.4 s decision at 5 fps plays at twice real time."""
+FPS_RANGE = (0.1, 50.0)
+"""Frame rates a video may have. A GIF's delays are whole hundredths of a second and most
+viewers play any delay under two of them as ten, so above 50 fps a GIF plays slower, not
+faster; below 0.1 fps one frame stays on screen for ten seconds."""
+SCALE_RANGE = (0.05, 4.0)
+"""Factors a frame may be resized by (the renderer's frames are a few hundred pixels wide)."""
+
+
+def check_video_options(fps: float = DEFAULT_FPS, every: int = 1, scale: float = 1.0) -> None:
+    """Refuse a frame rate, frame step or scale outside its range, naming every one that is
+    (NaN is outside every range)."""
+    problems = []
+    if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        problems.append(f"fps must be in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {fps}")
+    if not every >= 1:
+        problems.append(f"every must be an integer ≥ 1, got {every}")
+    if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+        problems.append(f"scale must be in [{SCALE_RANGE[0]:g}, {SCALE_RANGE[1]:g}], got {scale}")
+    if problems:
+        raise InvalidOptionError("; ".join(problems))
 
 
 def prepare(frames: Sequence[np.ndarray], every: int = 1, scale: float = 1.0) -> list[np.ndarray]:
     """Every ``every``-th frame (the last one always kept: it shows the result), resized by
     ``scale``."""
-    if every < 1 or not 0.05 <= scale <= 4.0:
-        raise InvalidOptionError(f"every must be ≥ 1 and scale in [0.05, 4]; got {every}, {scale}")
+    check_video_options(every=every, scale=scale)
     if not frames:
         raise InvalidOptionError("no frames to write")
     keep = list(range(0, len(frames), every))
@@ -55,6 +74,7 @@ def write_gif(path: str | Path, frames: Sequence[np.ndarray], fps: float = DEFAU
     palette, and a palette that changes from frame to frame makes colours flicker. The
     renderer draws with a dozen colours, so one palette built from a few frames fits all.
     """
+    check_video_options(fps)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     picks = np.linspace(0, len(frames) - 1, min(PALETTE_SAMPLES, len(frames))).round()
@@ -84,6 +104,7 @@ def check_writable(path: str | Path) -> None:
 def write_mp4(path: str | Path, frames: Sequence[np.ndarray], fps: float = DEFAULT_FPS) -> Path:
     """Write an H.264 MP4 (needs imageio-ffmpeg); return its path."""
     check_writable(path)
+    check_video_options(fps)
     import imageio.v2 as iio2
 
     path = Path(path)
@@ -112,6 +133,7 @@ def write_video(
 ) -> Path:
     """GIF or MP4 by the file's suffix, after :func:`prepare`."""
     check_writable(path)
+    check_video_options(fps, every, scale)
     kept = prepare(frames, every, scale)
     if Path(path).suffix.lower() == ".gif":
         return write_gif(path, kept, fps)

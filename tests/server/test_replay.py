@@ -147,3 +147,44 @@ def test_mp4_without_imageio_ffmpeg_names_the_extra(
     )
     assert R.main([str(recorded), "--mp4", str(tmp_path / "ep.mp4")]) == 2
     assert "pip install 'neuronsmae[video]'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--fps", "nan", "--gif", "x.gif"], "--fps must be in [0.1, 50], got nan"),
+        (["--fps", "1e-9", "--gif", "x.gif"], "--fps must be in [0.1, 50]"),
+        (["--fps", "inf"], "--fps must be in [0.1, 50], got inf"),
+        (["--fps", "0"], "--fps must be in [0.1, 50]"),
+        (["--every", "0", "--scale", "nan"], "--every must be an integer ≥ 1, got 0; --scale"),
+        (["--scale", "0"], "--scale must be in [0.05, 4], got 0.0"),
+    ],
+)
+def test_video_flags_outside_their_range_are_usage_errors_before_any_replay(
+    recorded: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], flags: list[str], named: str,
+) -> None:  # fmt: skip
+    """NaN or a vanishing frame rate used to crash the GIF writer after the whole replay;
+    an infinite one wrote a GIF with zero delays; a bad --every or --scale passed unseen
+    unless a video was asked for."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(R, "replay", lambda *a, **k: pytest.fail("replayed a refused run"))
+    with pytest.raises(SystemExit) as exc:
+        R.main([str(recorded), *flags])
+    assert exc.value.code == 2
+    assert named in capsys.readouterr().err
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_the_video_writers_refuse_a_rate_outside_its_range(tmp_path: Path) -> None:
+    from neuronsmae.protocol.errors import InvalidOptionError
+    from neuronsmae.server.tools.video import write_gif, write_video
+
+    frame = np.zeros((8, 8, 3), dtype=np.uint8)
+    for fps in (float("nan"), 0.0, 1e-9, 51.0, float("inf")):
+        with pytest.raises(InvalidOptionError, match=r"fps must be in \[0.1, 50\]"):
+            write_gif(tmp_path / "a.gif", [frame], fps)
+    with pytest.raises(InvalidOptionError, match="every must be an integer ≥ 1"):
+        write_video(tmp_path / "a.gif", [frame], every=0)
+    assert not (tmp_path / "a.gif").exists()
+    assert write_gif(tmp_path / "b.gif", [frame, frame], 50.0).exists()
