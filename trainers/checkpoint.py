@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.trainers.learner import AgentSpec, EnvSpec
 
 CHECKPOINT_NAME = "checkpoint.pt"
@@ -25,6 +26,13 @@ CHECKPOINT_NAME = "checkpoint.pt"
 FORMAT = 2
 """Bumped when the layout changes incompatibly (2: the nested training config, and agent
 specs that carry the environment's layout)."""
+
+
+class CheckpointError(NeuronsMAEError, ValueError):
+    """A file given as a checkpoint is not one this version reads: not a torch file, not
+    loadable with ``weights_only=True`` (it would run pickled code), or another format."""
+
+    code = "invalid_checkpoint"
 
 
 @dataclass
@@ -101,9 +109,17 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     p = checkpoint_path(path)
     if not p.is_file():
         raise FileNotFoundError(f"no checkpoint at {p}")
-    payload = torch.load(p, map_location="cpu", weights_only=True)
-    if payload.get("format") != FORMAT:
-        raise ValueError(f"{p} has checkpoint format {payload.get('format')}, not {FORMAT}")
+    try:
+        payload = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch reports a bad file as any of several error types
+        raise CheckpointError(
+            f"{p} is not a NeuronsMAE checkpoint: torch.load(weights_only=True) cannot read "
+            f"it ({type(exc).__name__}); give a checkpoint.pt, best.pt or snapshot written by "
+            "neuronsmae-train, or its run directory"
+        ) from exc
+    found = payload.get("format") if isinstance(payload, dict) else None
+    if found != FORMAT:
+        raise CheckpointError(f"{p} has checkpoint format {found}, not {FORMAT}")
     return payload
 
 

@@ -142,11 +142,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, OSError) as err:
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
+    from neuronsmae.trainers.checkpoint import CheckpointError
     from neuronsmae.trainers.train import train  # heavy imports (Ray, torch) after parsing
 
     try:
         result = train(cfg, resume=args.resume)
-    except ConfigError as err:  # what only the environment can tell (layouts, contexts)
+    except (ConfigError, CheckpointError) as err:  # what only the environment can tell
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
     final, counters = result["final"], result["counters"]

@@ -73,6 +73,9 @@ released build's levels "0" and "1" (docs/contexts.md, "Bots")."""
 ENV_KINDS = ("inprocess", "remote")
 """``remote``: each worker owns a ``VecRM`` of its own vector server; ``inprocess``: each
 owns a ``VecArena``."""
+MAX_RUN_SEED = 2**32 - 1
+"""Largest run seed: the range every generator a run seeds accepts as it is; worker ``i``'s
+arenas are seeded from ``seed × 1000`` on (trainers/train.py), far below an arena's limit."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +95,8 @@ class TrainConfig:
     (trainers/pool.py). A policy on red needs equal teams and the blue layout it was trained
     on. Empty: every episode plays ``level``."""
     seed: int = 1
-    """Seeds the networks, exploration, replay sampling and the training episodes."""
+    """Seeds the networks, exploration, replay sampling and the training episodes, in
+    [0, 2³²−1] (NumPy's, Python's and torch's generators all take it as it is)."""
     episodes: int = 30_000
     """Training episodes in total, ≥ 1 (a resumed run continues until this many). The default
     is the paper's budget (20 workers × 1,501 iterations); on a 2-core machine
@@ -175,6 +179,8 @@ class TrainConfig:
                     f"got {getattr(self.cluster, name)}"
                 )
         check_finite(self)
+        if not 0 <= self.seed <= MAX_RUN_SEED:
+            raise ConfigError(f"seed must be in [0, {MAX_RUN_SEED}], got {self.seed}")
         if self.workers < 0 or self.max_minutes < 0:
             raise ConfigError(
                 f"workers and max_minutes must be ≥ 0, got {self.workers} and {self.max_minutes}"
@@ -381,11 +387,19 @@ def read_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise ConfigError("TOML config files need Python ≥ 3.11; use a .json file")
         import tomllib
 
-        data = tomllib.loads(p.read_text())
+        parse, malformed = tomllib.loads, tomllib.TOMLDecodeError
     elif p.suffix == ".json":
-        data = json.loads(p.read_text())
+        parse, malformed = json.loads, json.JSONDecodeError
     else:
         raise ConfigError(f"config file {p} must end in .toml or .json")
+    try:
+        data = parse(p.read_text())
+    except (malformed, UnicodeDecodeError) as exc:
+        raise ConfigError(f"config file {p} is not valid {p.suffix[1:].upper()}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"config file {p} must hold a table of config keys, got {type(data).__name__}"
+        )
     if isinstance(data.get("train"), dict) and len(data) == 1:
         data = data["train"]
     return flatten(data, str(p))

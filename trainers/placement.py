@@ -19,11 +19,18 @@ Three ways to give each rollout worker ``i`` its server (``env="remote"``):
 ``worker_resources`` (e.g. ``"sampler=1"``) makes each worker also require a custom resource,
 so workers land only on nodes started with ``ray start --resources '{"sampler": N}'``, at
 most N per node.
+
+:func:`start_ray` starts the run's local Ray, sized so that every worker is placed however
+few cores there are, or joins ``cluster.address``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
+import math
+import os
+import socket
 from collections.abc import Mapping
 from typing import Any
 
@@ -32,7 +39,7 @@ from ray.exceptions import GetTimeoutError, RayError
 
 from neuronsmae.client import answering_pid
 from neuronsmae.protocol.launch import ServerCommand, ServerProcess, launch_private
-from neuronsmae.trainers.config import TrainConfig, parse_resources
+from neuronsmae.trainers.config import ConfigError, TrainConfig, parse_resources
 
 SERVER_STARTUP_S = 180.0
 """Seconds a server actor's server may take to answer (imports, JIT cache, arena build)."""
@@ -160,3 +167,53 @@ def sampler_placement(cfg: TrainConfig, n_workers: int, base_seed: int) -> dict[
             arenas=cfg.envs_per_worker,
         )
     return out
+
+
+def local_cpus(cfg: TrainConfig) -> int:
+    """CPUs to tell a local Ray it has: the machine's, or as many as the workers (and their
+    server actors) reserve plus one for the learner if that is more. Ray then places every
+    worker however few cores there are (they share them, oversubscribed), instead of
+    leaving some pending for ever."""
+    need = cfg.n_workers() * cfg.cluster.worker_cpus
+    if cfg.env == "remote" and cfg.cluster.servers == "actors":
+        need += cfg.n_workers() * SERVER_CPUS
+    return max(os.cpu_count() or 1, math.ceil(need) + 1)
+
+
+def start_ray(cfg: TrainConfig) -> None:
+    """A local Ray sized by :func:`local_cpus`, or join ``cluster.address``; an address
+    where no Ray cluster answers is a :class:`ConfigError` naming it."""
+    address = cfg.cluster.address
+    if address and address != "auto":
+        check_reachable(address)
+    try:
+        ray.init(
+            address=address or "local",  # never join a stray cluster by accident
+            num_cpus=None if address else local_cpus(cfg),
+            include_dashboard=False,
+            logging_level=logging.WARNING,
+            log_to_driver=False,
+        )
+    except ConnectionError as exc:
+        raise ConfigError(
+            f"cluster.address {address!r}: no Ray cluster answers there ({exc}); give the head "
+            "node's host:port as `ray start --head` printed it, or leave it empty for a "
+            "local Ray"
+        ) from None
+
+
+def check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """Refuse a ``host:port`` (or ``ray://host:port``) where nothing accepts a connection
+    within ``timeout_s``: ``ray.init`` itself keeps retrying such an address for minutes."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigError(
+            f"cluster.address must be 'auto', host:port or ray://host:port, got {address!r}"
+        )
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ConfigError(
+            f"cluster.address {address!r}: nothing accepts connections there ({exc}); start "
+            "the head with `ray start --head`, or leave the address empty for a local Ray"
+        ) from None

@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
-import os
 import random
 import time
 from collections import deque
@@ -57,7 +55,7 @@ from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
-from neuronsmae.trainers.placement import SERVER_CPUS, sampler_placement
+from neuronsmae.trainers.placement import sampler_placement, start_ray
 from neuronsmae.trainers.records import Recorder
 from neuronsmae.trainers.rollout import Policy, Request
 from neuronsmae.trainers.sampler import Sampler
@@ -73,17 +71,6 @@ log = logging.getLogger(__name__)
 
 Hook = Callable[["Trainer"], None]
 """Called after every batch of landed episodes (tests use it to inject faults)."""
-
-
-def local_cpus(cfg: TrainConfig) -> int:
-    """CPUs to tell a local Ray it has: the machine's, or as many as the workers (and their
-    server actors) reserve plus one for the learner if that is more. Ray then places every
-    worker however few cores there are (they share them, oversubscribed), instead of
-    leaving some pending for ever."""
-    need = cfg.n_workers() * cfg.cluster.worker_cpus
-    if cfg.env == "remote" and cfg.cluster.servers == "actors":
-        need += cfg.n_workers() * SERVER_CPUS
-    return max(os.cpu_count() or 1, math.ceil(need) + 1)
 
 
 def train_seed(run_seed: int, k: int, eval_seed: int) -> int:
@@ -126,13 +113,7 @@ class Trainer:
         """Acting weights of the best validation evaluation, and that evaluation's row."""
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
-            ray.init(
-                address=cfg.cluster.address or "local",  # never join a stray cluster by accident
-                num_cpus=None if cfg.cluster.address else local_cpus(cfg),
-                include_dashboard=False,
-                logging_level=logging.WARNING,
-                log_to_driver=False,
-            )
+            start_ray(cfg)
         try:
             self._build(cfg)
             if resume:

@@ -159,6 +159,61 @@ def test_files_with_tables_dotted_and_bare_keys(tmp_path: Path) -> None:
         read_config_file(tmp_path / "c.yaml")
 
 
+@pytest.mark.parametrize(
+    ("name", "text", "said"),
+    [
+        ("bad.toml", "[learner\n", "is not valid TOML: Expected ']'"),
+        ("bad.json", "{not json", "is not valid JSON: Expecting property name"),
+        ("list.json", "[1, 2]", "must hold a table of config keys, got list"),
+        ("text.json", '"lr"', "must hold a table of config keys, got str"),
+        ("binary.toml", b"\xff\xfe", "is not valid TOML"),
+    ],
+)
+def test_a_malformed_config_file_is_a_config_error_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, text: str | bytes, said: str
+) -> None:
+    """These were a tomllib/json traceback or an AttributeError."""
+    f = tmp_path / name
+    f.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(ConfigError, match=re.escape(f"config file {f} {said}")):
+        read_config_file(f)
+    assert main(["--config", str(f), "--episodes", "1"]) == 2
+    assert f"config file {f}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", [-1, 2**32])
+def test_a_run_seed_outside_its_range_is_refused_before_training(
+    seed: int, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A negative seed ended in NumPy's ValueError once Ray and the workers had started."""
+    with pytest.raises(ConfigError, match=r"seed must be in \[0, 4294967295\]"):
+        make_config({"seed": seed})
+    assert main(["--seed", str(seed), "--episodes", "1"]) == 2
+    assert "seed must be in [0, 4294967295]" in capsys.readouterr().err
+    assert make_config({"seed": 2**32 - 1}).seed == 2**32 - 1
+
+
+def test_an_address_where_nothing_listens_is_refused_at_once() -> None:
+    """ray.init kept retrying such an address for over five minutes."""
+    import socket
+
+    from neuronsmae.trainers.placement import check_reachable
+
+    with socket.socket() as probe:  # a port that was free a moment ago: nothing listens
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    for address in (f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
+        with pytest.raises(ConfigError, match="nothing accepts connections there"):
+            check_reachable(address)
+    for address in ("nohost", "host:", "host:99999", "host:port"):
+        with pytest.raises(ConfigError, match="must be 'auto', host:port or ray://host:port"):
+            check_reachable(address)
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        check_reachable(f"127.0.0.1:{server.getsockname()[1]}")
+
+
 def test_the_saved_config_is_nested_and_reads_back(tmp_path: Path) -> None:
     cfg = make_config({"alg": "qmix", "lr": 2e-3, "start_replay": 0.5, "address": "auto"})
     saved = json.loads(json.dumps(cfg.to_dict()))
@@ -286,9 +341,26 @@ def test_bad_contexts_and_levels_are_config_errors(layer: dict, message: str) ->
 def test_a_local_ray_is_told_enough_cpus_for_every_worker_and_server(
     workers: int, servers: str
 ) -> None:
-    from neuronsmae.trainers.placement import SERVER_CPUS
-    from neuronsmae.trainers.train import local_cpus
+    from neuronsmae.trainers.placement import SERVER_CPUS, local_cpus
 
     cfg = make_config({"workers": workers, "env": "remote", "cluster": {"servers": servers}})
     need = workers * cfg.cluster.worker_cpus + (workers * SERVER_CPUS if servers == "actors" else 0)
     assert local_cpus(cfg) >= need + 1  # every worker and server actor placed, and the learner
+
+
+def test_a_bad_checkpoint_or_cluster_is_reported_without_a_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """What only starting the run finds (an opponent or resumed checkpoint that is no
+    checkpoint, a cluster address nothing answers at) ends the command with status 2."""
+    from neuronsmae.trainers import train as train_module
+    from neuronsmae.trainers.checkpoint import CheckpointError
+
+    for error in (CheckpointError("x.pt is not a NeuronsMAE checkpoint"), ConfigError("no Ray")):
+
+        def refuse(*args: object, error: Exception = error, **kwargs: object) -> None:
+            raise error
+
+        monkeypatch.setattr(train_module, "train", refuse)
+        assert main(["--out", str(tmp_path / "run"), "--episodes", "1"]) == 2
+        assert str(error) in capsys.readouterr().err

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 from neuronsmae.trainers.config import make_config
-from neuronsmae.trainers.train import Trainer, local_cpus
+from neuronsmae.trainers.placement import local_cpus
+from neuronsmae.trainers.train import Trainer
 from tests.trainers.conftest import TINY_LEARNER
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
