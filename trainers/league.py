@@ -71,6 +71,10 @@ def expand(entries: Sequence[str], bots: Sequence[str]) -> list[Player]:
         if bot not in LEVEL_ARGS:
             raise InvalidOptionError(f"--bots: {bot!r} is not a bot level; valid: {LEVEL_ARGS}")
         players.append(Player(bot, f"bot:{bot}"))
+    specs = [p.spec if p.spec in LEVEL_ARGS else str(Path(p.spec).resolve()) for p in players]
+    twice = sorted({p.spec for p, s in zip(players, specs, strict=True) if specs.count(s) > 1})
+    if twice:
+        raise InvalidOptionError(f"a league plays each player once; named twice: {twice}")
     names = [p.name for p in players]
     if len(set(names)) != len(names):  # same file names in several runs: keep the folder
         players = [Player(p.spec, p.spec if p.spec not in LEVEL_ARGS else p.name)
@@ -199,6 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.arenas < 1 or (args.servers is not None and args.servers < 1):
         parser.error(f"--arenas and --servers must be at least 1, got {args.arenas} and "
                      f"{args.servers}")  # fmt: skip
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out} exists and is not a directory")
     bots = [b.strip() for b in args.bots.split(",") if b.strip()]
     try:
         players = expand(args.entries, bots)

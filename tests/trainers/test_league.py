@@ -73,3 +73,29 @@ def test_zero_arenas_or_servers_is_a_usage_error(
         main(argv)
     assert exc.value.code == 2
     assert "--arenas and --servers must be at least 1" in capsys.readouterr().err
+
+
+def test_a_player_named_twice_is_refused(tmp_path: Path) -> None:
+    """A bot or checkpoint given twice used to enter the league as two players."""
+    run = tmp_path / "run"
+    (run / "checkpoint.pt").parent.mkdir(parents=True)
+    (run / "checkpoint.pt").write_bytes(b"")
+    with pytest.raises(InvalidOptionError, match=r"named twice: \['easy'\]"):
+        expand([], ["easy", "hard", "easy"])
+    with pytest.raises(InvalidOptionError, match="named twice"):
+        expand([str(run), str(run / "checkpoint.pt")], ["easy"])
+
+
+def test_an_out_that_is_a_file_is_refused_before_the_league_is_played(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It used to end in FileExistsError after every game had been played."""
+    from neuronsmae.trainers import league
+
+    monkeypatch.setattr(league, "run_league", lambda *a, **k: pytest.fail("played"))
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    with pytest.raises(SystemExit) as exc:
+        main(["--bots", "easy,hard", "--out", str(taken)])
+    assert exc.value.code == 2
+    assert f"--out {taken} exists and is not a directory" in capsys.readouterr().err
