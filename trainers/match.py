@@ -189,6 +189,8 @@ def play(
             f"episodes and arenas must be at least 1, got {episodes} and {arenas}"
         )
     setup = arrange(Side.of(blue, "--blue"), Side.of(red, "--red"), options)
+    if record is not None and record.exists() and not record.is_dir():
+        raise InvalidOptionError(f"record: {record} exists and is not a directory")
     k = min(arenas, episodes)
     env = open_arenas(seed, k, setup.options, port, servers)
     try:

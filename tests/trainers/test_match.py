@@ -48,6 +48,17 @@ def test_play_refuses_zero_arenas_instead_of_playing_one() -> None:
         M.play("easy", "easy", 2, 0, arenas=0)
 
 
+def test_a_record_dir_that_is_a_file_is_refused_before_playing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """It used to fail with a bare FileExistsError once the first episode had been played."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    with pytest.raises(InvalidOptionError, match=f"record: {taken} exists and is not a dir"):
+        M.play("easy", "easy", 2, 0, record=taken)
+
+
 def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
     with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
         M.play("easy", "nowhere.pt", 1, 0)
