@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
+import math
 import random
 from collections import deque
 from dataclasses import dataclass
@@ -37,6 +38,7 @@ import torch
 from torch import nn
 
 from neuronsmae.protocol import ArenaAPI, EnvInfo
+from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.trainers.agent import (
     RNNAgent,
     build_inputs,
@@ -44,6 +46,7 @@ from neuronsmae.trainers.agent import (
     epsilon_greedy,
     masked_greedy,
 )
+from neuronsmae.trainers.config_groups import ConfigError
 from neuronsmae.trainers.mixers import make_mixer
 
 
@@ -54,7 +57,8 @@ class Args:
     alg: str = "vdn"
     """vdn (the team's Q is the sum of the agents') or qmix (a monotonic mixing network)."""
     level: str = "easy"
-    """Opponent bot: easy, middle or hard."""
+    """Opponent bot: the paper's easy, middle or hard, or any other level a command line
+    takes (protocol/levels.py: random, middle_spread, hard_flank, the released 0 and 1)."""
     episodes: int = 200
     """Training episodes."""
     seed: int = 1
@@ -81,6 +85,27 @@ class Args:
     """Gradient-norm clip (paper: 10)."""
     eval_episodes: int = 20
     """Greedy episodes on held-out seeds at the end."""
+
+    def __post_init__(self) -> None:
+        """Refuse a setting outside its range, naming it and the range."""
+        valid = {
+            "alg": (self.alg in ("vdn", "qmix"), "vdn or qmix"),
+            "level": (self.level in LEVEL_ARGS, f"one of {', '.join(LEVEL_ARGS)}"),
+            "seed": (0 <= self.seed < 2**32, "in [0, 2³²−1]"),
+            "lr": (0 < self.lr < math.inf, "a finite number > 0"),
+            "gamma": (0 <= self.gamma <= 1, "in [0, 1]"),
+            "eps_start": (0 <= self.eps_start <= 1, "in [0, 1]"),
+            "eps_end": (0 <= self.eps_end <= 1, "in [0, 1]"),
+            "grad_clip": (0 < self.grad_clip < math.inf, "a finite number > 0"),
+            "buffer_size": (self.buffer_size >= self.batch_size, "≥ batch_size"),
+        }
+        for name in ("episodes", "eps_anneal", "batch_size", "target_every", "hidden",
+                     "eval_episodes"):  # fmt: skip
+            valid[name] = (getattr(self, name) >= 1, "an integer ≥ 1")
+        wrong = [f"{k} must be {what}, got {getattr(self, k)!r}" for k, (ok, what) in
+                 valid.items() if not ok]  # fmt: skip
+        if wrong:
+            raise ConfigError("; ".join(wrong))
 
 
 EVAL_SEED = 1_000_000_000
@@ -110,7 +135,7 @@ def play(
 ) -> dict[str, Any]:
     """One whole episode at exploration rate ``epsilon``; its arrays and its winner."""
     n = info.n_agents
-    obs = env.reset(contexts={"level": level}, seed=seed)
+    obs = env.reset(contexts={"level": level_from_arg(level)}, seed=seed)
     hidden, last = agent.initial_hidden(n), torch.full((n,), -1)
     steps: dict[str, list[Any]] = {
         "obs": [obs],
@@ -207,8 +232,6 @@ def train(args: Args, env: ArenaAPI | None = None) -> dict[str, Any]:
 
     Returns the networks, the loss of every update and the greedy win rate.
     """
-    if args.alg not in ("vdn", "qmix"):
-        raise ValueError(f"alg={args.alg!r}; valid: vdn, qmix")
     own = env is None
     if env is None:
         from neuronsmae.server import Arena  # the in-process arena
@@ -274,7 +297,10 @@ def parse_args(argv: list[str] | None = None) -> Args:
             default=f.default,
             help=f"default: {f.default}",
         )
-    return Args(**vars(parser.parse_args(argv)))
+    try:
+        return Args(**vars(parser.parse_args(argv)))
+    except ConfigError as exc:
+        parser.error(str(exc))
 
 
 def main(argv: list[str] | None = None) -> None:

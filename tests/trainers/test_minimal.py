@@ -55,5 +55,34 @@ def test_episodes_pad_to_the_longest_with_masks() -> None:
 def test_the_command_line_reads_every_setting() -> None:
     args = parse_args(["--alg", "qmix", "--episodes", "7", "--eps-end", "0.1"])
     assert (args.alg, args.episodes, args.eps_end) == ("qmix", 7, 0.1)
-    with pytest.raises(ValueError, match="valid: vdn, qmix"):
+    with pytest.raises(ValueError, match="alg must be vdn or qmix, got 'mappo'"):
         train(Args(alg="mappo"))
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["--alg", "mappo"], "alg must be vdn or qmix, got 'mappo'"),
+        (["--level", "expert"], "level must be one of 0, 1, easy, middle, hard"),
+        (["--lr", "nan"], "lr must be a finite number > 0, got nan"),
+        (["--gamma", "2", "--eps-start", "5"], "gamma must be in [0, 1], got 2.0; eps_start"),
+        (["--batch-size", "0"], "batch_size must be an integer ≥ 1, got 0"),
+        (["--buffer-size", "4"], "buffer_size must be ≥ batch_size, got 4"),
+        (["--seed", "-1"], "seed must be in [0, 2³²−1], got -1"),
+        (["--episodes", "0"], "episodes must be an integer ≥ 1, got 0"),
+    ],
+)
+def test_a_setting_outside_its_range_is_a_usage_error(
+    argv: list[str], said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """These were tracebacks from torch or numpy, or ran silently (0 episodes, γ = 2)."""
+    with pytest.raises(SystemExit) as exc:
+        parse_args(argv)
+    assert exc.value.code == 2
+    assert said in capsys.readouterr().err
+
+
+def test_the_released_levels_play_as_numbers() -> None:
+    """``--level 0`` reached reset as the string "0", which the arena refuses."""
+    result = train(parse_args(["--level", "0", "--episodes", "1", "--eval-episodes", "1"]))
+    assert 0.0 <= result["win_rate"] <= 1.0
