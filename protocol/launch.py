@@ -237,7 +237,8 @@ def check_timeout(timeout: Any) -> None:
 
 
 def ports_of(port: int | Sequence[int] | None) -> list[int] | None:
-    """``None`` (private servers), one port, or several, as a list (None stays None)."""
+    """``None`` (private servers), one port, or several distinct ones, as a list (None
+    stays None)."""
     if port is None:
         return None
     ports = [port] if isinstance(port, int) else list(port)
@@ -246,4 +247,7 @@ def ports_of(port: int | Sequence[int] | None) -> list[int] | None:
         raise InvalidOptionError(
             f"port must be an integer in 1..65535 or a list of them, got {port!r}"
         )
+    twice = sorted({p for p in ports if ports.count(p) > 1})
+    if twice:  # one server serves one client: the second connection would be refused busy
+        raise InvalidOptionError(f"port lists each server once; listed twice: {twice}")
     return ports

@@ -172,6 +172,13 @@ def test_a_bad_port_is_refused_before_anything_starts(port: object) -> None:
         context_table(port)  # type: ignore[arg-type]
 
 
+def test_a_port_listed_twice_is_refused_before_anything_starts() -> None:
+    """``VecRM(port=[P, P])`` used to connect twice and be refused by its own server as
+    busy."""
+    with pytest.raises(InvalidOptionError, match=r"listed twice: \[10000\]"):
+        VecRM(port=[10000, 10001, 10000], num_envs=3)
+
+
 @pytest.mark.parametrize("timeout", [0, -1.0, float("inf"), "2"])
 def test_a_query_without_a_finite_positive_timeout_is_refused(timeout: object) -> None:
     with pytest.raises(InvalidOptionError, match="timeout must be a finite number of seconds"):
