@@ -257,6 +257,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="one curve per run directory instead of the mean per algorithm and level",
     )
     args = p.parse_args(argv)
+    if args.out.suffix.lower() != ".png" or args.out.is_dir():
+        p.error(f"--out must name a .png file, got {str(args.out)!r}")
     try:
         runs = [load_run(path) for path in find_runs(args.runs)]
         out = plot_runs(runs, args.out, args.source, args.title, args.by_run)

@@ -81,6 +81,13 @@ def test_paper_numbers_and_bad_paths(tmp_path: Path, capsys: pytest.CaptureFixtu
     (empty / "config.json").write_text(json.dumps({"alg": "vdn", "level": "easy"}))
     assert P.main([str(empty), "--out", str(tmp_path / "x.png")]) == 2
     assert "nothing to plot" in capsys.readouterr().err
+    # a PNG written under another name, and a directory, were taken as --out
+    (tmp_path / "dir.png").mkdir()
+    for out in (tmp_path / "curves.txt", tmp_path / "dir.png"):
+        with pytest.raises(SystemExit) as exc:
+            P.main([str(empty), "--out", str(out)])
+        assert exc.value.code == 2
+        assert f"--out must name a .png file, got {str(out)!r}" in capsys.readouterr().err
 
 
 def test_paper_labels_close_together_do_not_overlap() -> None:
