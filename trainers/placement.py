@@ -152,12 +152,18 @@ class ServerPool:
         self.actors.clear()
 
 
-def sampler_placement(cfg: TrainConfig, n_workers: int, base_seed: int) -> dict[str, Any]:
+def sampler_placement(
+    cfg: TrainConfig, n_workers: int, base_seed: int, env_options: Mapping[str, Any]
+) -> dict[str, Any]:
     """The placement keyword arguments of :class:`~neuronsmae.trainers.sampler.Sampler`
-    for ``cfg`` (call after ``ray.init``: ``servers="actors"`` starts the servers here)."""
-    out: dict[str, Any] = {"worker_resources": parse_resources(cfg.cluster.worker_resources)}
+    for ``cfg``, ``env_options`` (the arenas') among them with the router added when there
+    is one (call after ``ray.init``: ``servers="actors"`` starts the servers here)."""
+    out: dict[str, Any] = {
+        "worker_resources": parse_resources(cfg.cluster.worker_resources),
+        "env_options": dict(env_options),
+    }
     if cfg.env == "remote" and cfg.cluster.router:
-        out["env_options"] = {"router": cfg.cluster.router}
+        out["env_options"]["router"] = cfg.cluster.router
     if cfg.env == "remote" and cfg.cluster.servers == "actors" and not cfg.cluster.router:
         out["servers"] = ServerPool(
             n_workers,

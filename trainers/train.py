@@ -143,8 +143,7 @@ class Trainer:
             servers_per_worker=cfg.cluster.servers_per_worker,
             worker_cpus=cfg.cluster.worker_cpus,
             max_failures=cfg.cluster.max_worker_failures,
-            env_options=cfg.arena.arena_options(self.mode),
-            **sampler_placement(cfg, n_workers, base_seed),
+            **sampler_placement(cfg, n_workers, base_seed, cfg.arena.arena_options(self.mode)),
         )
         self._check_contexts()
         info = blue_view(EnvInfo.from_dict(self.sampler.env_info()))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import subprocess
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,3 +91,38 @@ def test_rm_with_unreachable_router_never_launches() -> None:
     with pytest.raises(ServerUnavailableError, match="router"):
         RM(port=port, router=f"tcp/127.0.0.1:{free_ports()}", timeout=2.0)
     assert not listening(port)
+
+
+def test_training_samples_through_the_router(spawn: Spawn, tmp_path: Path) -> None:
+    """``cluster.router``: every worker reaches its server ``base_port + i`` through the
+    router alone (the trainer used to fail at start with a TypeError for any router)."""
+    pytest.importorskip("ray")
+    from neuronsmae.trainers.config import make_config
+    from neuronsmae.trainers.placement import sampler_placement
+    from neuronsmae.trainers.train import train
+
+    r_port, base = free_ports(), free_ports(2)
+    router_ep = f"tcp/127.0.0.1:{r_port}"
+    values = {"env": "remote", "base_port": base, "router": router_ep, "envs_per_worker": 2}
+    placed = sampler_placement(make_config(values), 2, 0, {"n_blue": 2})
+    assert placed["env_options"] == {"n_blue": 2, "router": router_ep}
+
+    _router(spawn, r_port)
+    for i in range(2):
+        spawn(*server_cmd(base + i, "--router", router_ep, "--arenas", "2", "--seed",
+                          str(10 * i)), name=f"server{i}")  # fmt: skip
+    for i in range(2):
+        probe = Probe("127.0.0.1", base + i, router=router_ep, timeout=1.0)
+        try:
+            wait_for(lambda p=probe: p.ping().up, 180, f"server {i} through the router")
+        finally:
+            probe.close()
+    cfg = make_config(
+        values,
+        {"workers": 2, "episodes": 4, "eval_every": 0, "eval_episodes": 2,
+         "final_eval_episodes": 2, "batch_size": 2, "learning_starts": 2, "agent_hidden": 16,
+         "worker_cpus": 0.5, "progress": False, "out": str(tmp_path / "run")},
+    )  # fmt: skip
+    result = train(cfg)
+    assert result["counters"]["episodes"] >= 4
+    assert result["final"]["eval_episodes"] == 2
