@@ -21,15 +21,32 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Sequence
 
 import zenoh
+
+from neuronsmae.protocol.errors import InvalidOptionError
 
 MAX_BUSY_POLL_US = 100_000.0
 """Longest a server may poll for its next request (``neuronsmae-server --busy-poll``):
 beyond a tenth of a second it is a spinning server, not a fast one."""
 TLS_ENV = "NEURONSMAE_ZENOH_TLS"
 """Environment variable naming a Zenoh JSON5 file whose ``transport.link.tls`` to use."""
+
+
+LOCATOR = re.compile(r"[a-z][a-z0-9-]*/\S+")
+"""A Zenoh locator: ``<protocol>/<address>``, e.g. ``tcp/10.0.0.1:7447``, ``tls/h:7447``."""
+
+
+def check_locator(value: object, name: str = "router") -> None:
+    """Refuse a router that is not a Zenoh locator before any session is opened (Zenoh's
+    own refusal is a configuration parse error naming none of this)."""
+    if not isinstance(value, str) or not LOCATOR.fullmatch(value):
+        raise InvalidOptionError(
+            f"{name} must be a Zenoh locator <protocol>/<address> such as "
+            f"tcp/10.0.0.1:7447, got {value!r}"
+        )
 
 
 def endpoint(host: str, port: int) -> str:

@@ -14,6 +14,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.transport import check_locator
 from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
 from neuronsmae.trainers.symmetry import parse_generators
@@ -285,6 +287,11 @@ class ClusterConfig:
             raise ConfigError(
                 f"base_port must be 0 (private servers) or a port, got {self.base_port}"
             )
+        if self.router:
+            try:
+                check_locator(self.router, "cluster.router")
+            except InvalidOptionError as exc:
+                raise ConfigError(str(exc)) from None
         check_finite(self)
         if self.worker_cpus <= 0:
             raise ConfigError(f"worker_cpus must be > 0, got {self.worker_cpus}")

@@ -25,6 +25,7 @@ from typing import IO
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.launch import ServerCommand, check_launch
 from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
+from neuronsmae.protocol.transport import check_locator
 from neuronsmae.server.serving.probe import Health, Probe
 from neuronsmae.server.serving.rpc import PortInUseError, check_port
 
@@ -65,6 +66,8 @@ class FleetSpec:
             raise InvalidOptionError(
                 f"lease must be a finite number of seconds > 0, got {self.lease}"
             )
+        for router in self.routers:
+            check_locator(router)
 
     def ports(self) -> list[int]:
         return [self.base_port + i for i in range(self.count)]

@@ -172,6 +172,14 @@ def test_a_bad_port_is_refused_before_anything_starts(port: object) -> None:
         context_table(port)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("router", ["10.0.0.1:7447", "", "tcp/", 7447])
+def test_a_router_that_is_no_locator_is_refused_before_any_session(router: object) -> None:
+    """Zenoh's own refusal was a configuration parse error out of its Rust sources."""
+    for make in (lambda: RM(port=10000, router=router), lambda: VecRM(port=10000, router=router)):
+        with pytest.raises(InvalidOptionError, match="router must be a Zenoh locator"):
+            make()  # type: ignore[arg-type]
+
+
 def test_a_port_listed_twice_is_refused_before_anything_starts() -> None:
     """``VecRM(port=[P, P])`` used to connect twice and be refused by its own server as
     busy."""

@@ -142,6 +142,7 @@ def test_bad_count_is_a_usage_error() -> None:
         (["--lease", "nan"], "lease must be a finite number of seconds > 0, got nan"),
         (["--time-scale", "-2"], "time_scale must be a finite number >= 0"),
         (["--arenas", "65"], "arenas must be an integer in [1, 64], got 65"),
+        (["--router", "10.0.0.1:7447"], "router must be a Zenoh locator <protocol>/<address>"),
     ],
 )
 def test_bad_server_settings_are_usage_errors_before_any_server_starts(

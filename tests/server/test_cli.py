@@ -32,6 +32,11 @@ def test_defaults_are_valid() -> None:
         (["--lease", "0"], "--lease must be a finite number of seconds > 0, got 0"),
         (["--lease", "inf"], "--lease must be a finite number of seconds > 0, got inf"),
         (["--busy-poll", "-5"], "--busy-poll must be in 0..100000 microseconds, got -5"),
+        (
+            ["--router", "tcp/h:7447", "--router", "h:7447"],
+            "--router must be a Zenoh locator <protocol>/<address> such as tcp/10.0.0.1:7447, "
+            "got 'h:7447'",
+        ),
     ],
 )
 def test_bad_argument_is_refused_by_name(

@@ -193,6 +193,12 @@ def test_a_run_seed_outside_its_range_is_refused_before_training(
     assert make_config({"seed": 2**32 - 1}).seed == 2**32 - 1
 
 
+def test_a_cluster_router_that_is_no_locator_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"cluster\.router must be a Zenoh locator"):
+        make_config({"router": "10.0.0.1:7447"})
+    assert make_config({"router": "tls/10.0.0.1:7447"}).cluster.router == "tls/10.0.0.1:7447"
+
+
 def test_an_address_where_nothing_listens_is_refused_at_once() -> None:
     """ray.init kept retrying such an address for over five minutes."""
     import socket
