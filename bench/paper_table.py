@@ -51,8 +51,14 @@ from scipy import stats
 
 from bench.common import at_least, non_negative
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
-from neuronsmae.trainers.config import TrainConfig, make_config, parse_overrides, preset
-from neuronsmae.trainers.contexts import ContextSpec
+from neuronsmae.trainers.config import (
+    ConfigError,
+    TrainConfig,
+    make_config,
+    parse_overrides,
+    preset,
+)
+from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.evaluate import evaluate_checkpoint
 from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
@@ -103,10 +109,21 @@ def cell_config(
     return make_config(*layers)
 
 
+class TableFileError(ValueError):
+    """``--out`` holds something other than a table this script wrote."""
+
+
 def load(path: Path) -> dict[str, Any]:
-    if path.is_file():
-        return json.loads(path.read_text())
-    return {"records": []}
+    """The recorded table at ``path`` (an empty one where there is no file yet)."""
+    if not path.exists():
+        return {"records": []}
+    try:
+        table = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise TableFileError(f"--out {path} is not a table this script wrote: {exc}") from None
+    if not isinstance(table, dict) or not isinstance(table.get("records"), list):
+        raise TableFileError(f"--out {path} is JSON but holds no list of 'records'")
+    return table
 
 
 def save(path: Path, table: dict[str, Any]) -> None:
@@ -194,7 +211,6 @@ def test_at(args: argparse.Namespace, extra: str) -> int:
     Returns how many records were added to.
     """
     more = ContextSpec.parse(extra)
-    more.value()  # fixed values only
     added = 0
     for rec in load(args.out)["records"]:
         if rec["learner"] != args.learner or extra in rec["test"]:
@@ -333,11 +349,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--report", action="store_true", help="print the table of --out and stop")
     p.add_argument(
         "--test-at",
+        type=fixed_contexts,
         metavar="KEY=VALUE;...",
         help="test the recorded runs' final weights again with these contexts over their "
         "test contexts (e.g. coef=0.5, the training context), store the results and stop",
     )
     args = p.parse_args(argv)
+    try:
+        load(args.out)  # refused before any run, never overwritten
+        cell_config(args, "vdn", args.levels[0], args.seeds[0], args.runs)  # the --set keys
+    except (TableFileError, ConfigError) as exc:
+        p.error(str(exc))
     if args.test_at:
         print(f"{test_at(args, args.test_at)} record(s) tested at {args.test_at}")
         return 0
@@ -361,6 +383,15 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"recorded {alg}/{level}/s{seed}: {line['test']}", flush=True)
     print(report(table, _seed_count(table, args.seeds)))
     return 0
+
+
+def fixed_contexts(text: str) -> str:
+    """``--test-at``'s value, checked: contexts with one fixed value each."""
+    try:
+        ContextSpec.parse(text).value()
+    except (ContextSpecError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def _seed_count(table: dict[str, Any], seeds: Sequence[int]) -> int:

@@ -120,3 +120,38 @@ def test_sampling_refuses_more_servers_than_a_served_worker_has_arenas(
     assert bench_sampling._args(["--env", "inprocess", "--envs", "2", "--servers", "3"])
     with pytest.raises(SystemExit):
         bench_sampling._args(["--env", "ray"])
+
+
+@pytest.mark.parametrize(
+    ("content", "argv", "message"),
+    [
+        ("not json", ["--report"], "is not a table this script wrote: Expecting value"),
+        ("[1]", ["--report"], "is JSON but holds no list of 'records'"),
+        (None, ["--test-at", "foo"], "argument --test-at: contexts: 'foo' is not key=value"),
+        (None, ["--test-at", "coef=0.5..1"], "evaluation contexts must be fixed; ['coef'] vary"),
+        (None, ["--set", "lr"], "--set expects key=value, got 'lr'"),
+        (None, ["--set", "lr=nan"], "lr must be a finite number, got nan"),
+    ],
+)
+def test_the_paper_table_refuses_a_bad_table_or_setting_before_any_run(
+    content: str | None,
+    argv: list[str],
+    message: str,
+    tmp_path: Any,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """These were tracebacks (a foreign --out file, --test-at), or a --set typo surfaced
+    only when the first 30-minute cell was configured."""
+    from bench import paper_table
+
+    out = tmp_path / "table.json"
+    if content is not None:
+        out.write_text(content)
+    monkeypatch.setattr(paper_table, "run_cell", _start)
+    with pytest.raises(SystemExit) as exit_:
+        paper_table.main(["--out", str(out), "--runs", str(tmp_path / "runs"), *argv])
+    assert exit_.value.code == 2
+    assert message in capsys.readouterr().err
+    if content is not None:
+        assert out.read_text() == content  # never overwritten
