@@ -42,7 +42,10 @@ def _head() -> str:
 
 def summarize(name: str, run_dir: Path) -> dict[str, Any]:
     """The summary of one finished run: its settings, counters, test figures and curve."""
-    config = json.loads((run_dir / "config.json").read_text())
+    try:
+        config = json.loads((run_dir / "config.json").read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{run_dir}/config.json is not a run's configuration: {exc}") from None
     evals = _rows(run_dir / "eval.csv")
     tests = [r for r in evals if r["split"] == "test"]
     if not tests:
@@ -76,9 +79,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--note", default="", help="what the runs are, for the reader")
     args = parser.parse_args(argv)
     pairs = [run.split("=", 1) for run in args.runs]
-    if any(len(pair) != 2 for pair in pairs):
+    if any(len(pair) != 2 or not all(pair) for pair in pairs):
         parser.error("each run is NAME=RUN_DIR")
-    runs = [summarize(name, Path(d)) for name, d in pairs]
+    names = [name for name, _ in pairs]
+    if len(set(names)) != len(names):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        parser.error(f"each run needs its own NAME; given twice: {twice}")
+    if args.out.suffix != ".json" or args.out.is_dir():
+        parser.error(f"--out must name a .json file, got {str(args.out)!r}")
+    try:
+        runs = [summarize(name, Path(d)) for name, d in pairs]
+    except (OSError, ValueError) as exc:  # no such run, unreadable or unfinished (named)
+        parser.error(str(exc))
     rows = [
         {"run": r["name"], "episodes": r["episodes"], "env steps": r["env_steps"],
          "final": r["test"]["latest"]["win_rate"],

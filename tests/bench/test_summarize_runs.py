@@ -59,3 +59,30 @@ def test_main_writes_json_with_the_snapshot_commit(tmp_path: Path, monkeypatch, 
     assert payload["commit"] == "abc123" and payload["what"] == "a test"
     assert payload["runs"][0]["name"] == "var"
     assert "| var | 900 | 40000 | 0.800 | 0.750 |" in capsys.readouterr().out
+
+
+def test_bad_runs_and_outputs_are_usage_errors_naming_them(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each of these was a traceback, or (a NAME twice) went into the JSON unseen."""
+    run = _run(tmp_path)
+    (tmp_path / "u").mkdir()
+    unfinished = _run(tmp_path / "u", finished=False)
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "config.json").write_text("{not json")
+    out = str(tmp_path / "s.json")
+    cases = [
+        ([f"a={tmp_path / 'nowhere'}", "--out", out], "nowhere/config.json"),
+        ([f"a={broken}", "--out", out], "broken/config.json is not a run's configuration"),
+        ([f"a={unfinished}", "--out", out], "no test rows"),
+        ([f"a={run}", f"a={run}", "--out", out], "given twice: ['a']"),
+        ([f"={run}", "--out", out], "each run is NAME=RUN_DIR"),
+        ([f"a={run}", "--out", str(tmp_path)], "--out must name a .json file"),
+    ]
+    for argv, said in cases:
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2
+        assert said in capsys.readouterr().err
+    assert not Path(out).exists()
