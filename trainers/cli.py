@@ -143,11 +143,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
     from neuronsmae.trainers.checkpoint import CheckpointError
+    from neuronsmae.trainers.sampler import PlacementError
     from neuronsmae.trainers.train import train  # heavy imports (Ray, torch) after parsing
 
     try:
         result = train(cfg, resume=args.resume)
-    except (ConfigError, CheckpointError) as err:  # what only the environment can tell
+    except (ConfigError, CheckpointError, PlacementError) as err:  # what only the run finds
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
     final, counters = result["final"], result["counters"]

@@ -358,11 +358,17 @@ def test_a_bad_checkpoint_or_cluster_is_reported_without_a_traceback(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """What only starting the run finds (an opponent or resumed checkpoint that is no
-    checkpoint, a cluster address nothing answers at) ends the command with status 2."""
+    checkpoint, a cluster address nothing answers at, workers the cluster cannot place)
+    ends the command with status 2 and the message, not a traceback."""
     from neuronsmae.trainers import train as train_module
     from neuronsmae.trainers.checkpoint import CheckpointError
+    from neuronsmae.trainers.sampler import PlacementError
 
-    for error in (CheckpointError("x.pt is not a NeuronsMAE checkpoint"), ConfigError("no Ray")):
+    for error in (
+        CheckpointError("x.pt is not a NeuronsMAE checkpoint"),
+        ConfigError("no Ray"),
+        PlacementError("2 rollout workers cannot be placed"),
+    ):
 
         def refuse(*args: object, error: Exception = error, **kwargs: object) -> None:
             raise error
