@@ -21,6 +21,7 @@ import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
+from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.protocol.recording import (
     SUFFIX,
     Decision,
@@ -50,6 +51,22 @@ def arena_identity(env: ArenaAPI) -> tuple[int, dict[str, Any]]:
             "arena_seed= and options= (the Arena(seed, **options) that plays the same)"
         )
     return int(seed), dict(options)
+
+
+def _check_settings(arena_seed: Any, limit: Any, prefix: Any) -> None:
+    """Refuse a seed outside an arena's range, a negative or non-integer ``limit`` and a
+    ``prefix`` that is not a plain file-name start (a path would write outside out_dir)."""
+    integer = isinstance(arena_seed, (int, np.integer)) and not isinstance(arena_seed, bool)
+    if not integer or not 0 <= int(arena_seed) <= MAX_SEED:
+        raise InvalidOptionError(
+            f"arena_seed must be an integer in [0, {MAX_SEED}], got {arena_seed!r}"
+        )
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 0):
+        raise InvalidOptionError(f"limit must be None or an integer ≥ 0, got {limit!r}")
+    if not isinstance(prefix, str) or any(c in prefix for c in "/\\\0") or ".." in prefix:
+        raise InvalidOptionError(
+            f"prefix must be the start of a file name (no '/', '\\' or '..'), got {prefix!r}"
+        )
 
 
 @inherit_docstrings
@@ -89,6 +106,7 @@ class Recorder(ArenaWrapper):
                 f"out_dir {str(out_dir)!r} exists and is not a directory; recordings go into a "
                 "directory (created on the first recorded episode if missing)"
             )
+        _check_settings(arena_seed, limit, prefix)
         self.seed = int(arena_seed)
         self.options = to_plain(dict(options))
         self.meta = to_plain(dict(meta or {}))

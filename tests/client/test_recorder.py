@@ -110,3 +110,27 @@ def test_episode_recorded_through_rm_replays_in_process(tmp_path: Path) -> None:
     assert rec.complete and result.decisions == len(rec.decisions)
     assert remote_frame.dtype == np.uint8 and remote_frame.ndim == 3
     assert same(remote_frame, result.frames[-1])
+
+
+@pytest.mark.parametrize(
+    ("settings", "said"),
+    [
+        ({"arena_seed": -1}, "arena_seed must be an integer in [0, 9223372036854775807], got -1"),
+        ({"arena_seed": 1.5}, "arena_seed must be an integer"),
+        ({"limit": -1}, "limit must be None or an integer ≥ 0, got -1"),
+        ({"prefix": "../escape_"}, "prefix must be the start of a file name"),
+        ({"prefix": "runs/ep_"}, "prefix must be the start of a file name"),
+    ],
+)
+def test_bad_recorder_settings_are_refused_by_name(
+    settings: dict[str, Any], said: str, tmp_path: Path
+) -> None:
+    """A negative seed was NumPy's ValueError; a prefix with a path wrote outside out_dir."""
+    arena = Arena(seed=1)
+    try:
+        with pytest.raises(InvalidOptionError) as exc:
+            Recorder(arena, tmp_path / "rec", **settings)
+        assert said in str(exc.value)
+        assert Recorder(arena, tmp_path / "rec", limit=0, prefix="blue_").limit == 0
+    finally:
+        arena.close()
