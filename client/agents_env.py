@@ -50,7 +50,7 @@ from gymnasium import spaces
 from neuronsmae.client.gym_env import AGENTS_ENV_ID, EpisodeSpec
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import per_agent_actions
+from neuronsmae.client.spaces import per_agent_actions, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 
 
@@ -102,7 +102,7 @@ class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Seque
         """Start an episode; ``seed`` re-seeds the arena; ``options={"contexts": ...}`` as
         ``CoopEnv``'s."""
         super().reset(seed=seed)
-        contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
+        contexts = reset_contexts(self.contexts, options)
         obs = self.arena.reset(contexts or None, self._first_seed(seed))
         self.arena_info = {}
         self._renderer.update()

@@ -47,7 +47,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import Layout
+from neuronsmae.client.spaces import Layout, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
@@ -172,7 +172,7 @@ class CoopEnv(EpisodeSpec, Recipe, gymnasium.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode; ``seed`` re-seeds the arena, as ``ArenaAPI.reset`` does."""
         super().reset(seed=seed)
-        contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
+        contexts = reset_contexts(self.contexts, options)
         obs = self.arena.reset(contexts or None, self._first_seed(seed))
         self.arena_info = {}
         info = start_info(self.layout.info, self.arena.get_state())

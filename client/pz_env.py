@@ -52,6 +52,7 @@ from pettingzoo.utils.env import AECEnv, ParallelEnv
 
 from neuronsmae.client.infos import copy_info, start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
+from neuronsmae.client.spaces import reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
@@ -144,7 +145,7 @@ class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[AgentID, Any], dict[AgentID, dict[str, Any]]]:
         """Start an episode with every possible agent; ``seed`` re-seeds the arena."""
-        contexts = {**self.contexts, **dict((options or {}).get("contexts") or {})}
+        contexts = reset_contexts(self.contexts, options)
         obs = self.arena.reset(contexts or None, self._first_seed(seed))
         self.agents = list(self.possible_agents)
         self._playing = True

@@ -245,3 +245,30 @@ def per_agent_actions(actions: Any, n_agents: int, discrete: bool = True) -> lis
                 f"agent {i}: an action is an integer (anything int() accepts), got {a!r:.80}"
             ) from exc
     return out
+
+
+RESET_OPTIONS = ("contexts",)
+"""The keys a face's ``reset(options=...)`` takes."""
+
+
+def reset_contexts(base: Mapping[str, Any], options: Any) -> dict[str, Any]:
+    """The contexts of an episode: the face's own ``base`` updated by
+    ``options["contexts"]``. ``options`` is None or a mapping of :data:`RESET_OPTIONS`;
+    anything else is an ``InvalidOptionError`` naming the valid keys."""
+    if options is None:
+        return dict(base)
+    if not isinstance(options, Mapping):
+        raise InvalidOptionError(
+            f"reset options must be a dict with keys {list(RESET_OPTIONS)}, got {options!r:.80}"
+        )
+    unknown = sorted(str(k) for k in options if k not in RESET_OPTIONS)
+    if unknown:
+        raise InvalidOptionError(
+            f"reset options {unknown} are not known; valid options: {list(RESET_OPTIONS)}"
+        )
+    contexts = options.get("contexts")
+    if contexts is not None and not isinstance(contexts, Mapping):
+        raise InvalidOptionError(
+            f"options['contexts'] must be a dict of context names to values, got {contexts!r:.80}"
+        )
+    return {**base, **dict(contexts or {})}

@@ -37,7 +37,7 @@ from gymnasium.vector.utils import batch_space
 from neuronsmae.client.gym_env import ENV_ID, EpisodeSpec, _coop
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import FirstSeed, open_vec_arena
-from neuronsmae.client.spaces import Layout
+from neuronsmae.client.spaces import Layout, reset_contexts
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import VecArenaAPI
 
@@ -105,13 +105,12 @@ class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every environment: ``seed`` an int (environment ``i`` gets ``seed + i``) or
         one per environment; ``options={"contexts": {...}}`` as ``CoopEnv``'s, for all."""
-        options = dict(options or {})
-        if "reset_mask" in options:
+        if isinstance(options, Mapping) and "reset_mask" in options:
             raise InvalidOptionError(
                 "options['reset_mask']: the arenas reset together (or by autoreset); valid "
                 "options: ['contexts']"
             )
-        contexts = {**self.contexts, **dict(options.get("contexts") or {})}
+        contexts = reset_contexts(self.contexts, options)
         obs = self.vec.reset(contexts or None, self._first_seed(seed))  # checks the seed
         if isinstance(seed, (int, np.integer)):
             self._np_random, self._np_random_seed = np.random.default_rng(int(seed)), int(seed)

@@ -428,3 +428,33 @@ def test_an_explicit_port_launches_a_server_there() -> None:
         assert steps[-1][3] and not steps[-1][2]
     finally:
         env.close()
+
+
+@pytest.mark.parametrize(
+    ("options", "said"),
+    [
+        ([1], "reset options must be a dict with keys ['contexts'], got [1]"),
+        ({"contexts": 3}, "options['contexts'] must be a dict of context names to values"),
+        ({"context": {"coef": 1.2}}, "reset options ['context'] are not known; valid options"),
+    ],
+)
+def test_bad_reset_options_are_refused_by_every_face(options: Any, said: str) -> None:
+    """A list was an AttributeError, a non-dict contexts a TypeError, and a misspelt key
+    (``context``) was ignored, so the episode silently ran at the default contexts."""
+    from neuronsmae.client.agents_env import AgentsEnv
+    from neuronsmae.client.pz_env import ArenaParallelEnv
+    from neuronsmae.client.vec_env import CoopVectorEnv
+    from neuronsmae.server.vec import VecArena
+
+    faces = [CoopEnv(env=Arena(seed=4, **SHORT)), AgentsEnv(env=Arena(seed=4, **SHORT)),
+             ArenaParallelEnv(env=Arena(seed=4, **SHORT)),
+             CoopVectorEnv(num_envs=2, env=VecArena(seed=4, num_envs=2, **SHORT))]  # fmt: skip
+    try:
+        for face in faces:
+            with pytest.raises(InvalidOptionError) as exc:
+                face.reset(seed=1, options=options)
+            assert said in str(exc.value), type(face).__name__
+            face.reset(seed=1, options={"contexts": {"coef": 1.2}})
+    finally:
+        for face in faces:
+            face.close()
