@@ -46,7 +46,7 @@ from neuronsmae.trainers.agent import (
     epsilon_greedy,
     masked_greedy,
 )
-from neuronsmae.trainers.config_groups import ConfigError
+from neuronsmae.trainers.config import MAX_RUN_SEED, ConfigError
 from neuronsmae.trainers.mixers import make_mixer
 
 
@@ -91,7 +91,7 @@ class Args:
         valid = {
             "alg": (self.alg in ("vdn", "qmix"), "vdn or qmix"),
             "level": (self.level in LEVEL_ARGS, f"one of {', '.join(LEVEL_ARGS)}"),
-            "seed": (0 <= self.seed < 2**32, "in [0, 2³²−1]"),
+            "seed": (0 <= self.seed <= MAX_RUN_SEED, "in [0, 2³²−1]"),
             "lr": (0 < self.lr < math.inf, "a finite number > 0"),
             "gamma": (0 <= self.gamma <= 1, "in [0, 1]"),
             "eps_start": (0 <= self.eps_start <= 1, "in [0, 1]"),

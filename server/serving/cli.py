@@ -23,9 +23,9 @@ from collections.abc import Sequence
 
 import zenoh
 
-from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
-from neuronsmae.protocol.transport import LOCATOR, MAX_BUSY_POLL_US
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_locator
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
 from neuronsmae.server.serving.rpc import (
@@ -149,11 +149,10 @@ def invalid_arguments(args: argparse.Namespace) -> list[str]:
     if not (math.isfinite(args.lease) and args.lease > 0):
         problems.append(f"--lease must be a finite number of seconds > 0, got {args.lease:g}")
     for router in args.router:
-        if not LOCATOR.fullmatch(router):
-            problems.append(
-                f"--router must be a Zenoh locator <protocol>/<address> such as "
-                f"tcp/10.0.0.1:7447, got {router!r}"
-            )
+        try:
+            check_locator(router, "--router")
+        except InvalidOptionError as exc:
+            problems.append(str(exc))
     if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
         problems.append(
             f"--busy-poll must be in 0..{MAX_BUSY_POLL_US:g} microseconds, got {args.busy_poll:g}"
