@@ -229,11 +229,11 @@ def launch_private(
     raise ServerUnavailableError(f"no free port on {host} after {attempts} attempts")
 
 
-def check_timeout(timeout: Any) -> None:
+def check_timeout(timeout: Any, name: str = "timeout") -> None:
     """Refuse a timeout that is not a finite number of seconds > 0, naming it."""
     number = isinstance(timeout, numbers.Real) and not isinstance(timeout, bool)
     if not (number and math.isfinite(timeout) and timeout > 0):
-        raise InvalidOptionError(f"timeout must be a finite number of seconds > 0, got {timeout!r}")
+        raise InvalidOptionError(f"{name} must be a finite number of seconds > 0, got {timeout!r}")
 
 
 def ports_of(port: int | Sequence[int] | None) -> list[int] | None:

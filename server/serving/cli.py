@@ -33,6 +33,7 @@ from neuronsmae.server.serving.rpc import (
     PortInUseError,
     RpcServer,
     StopSignal,
+    check_listen_host,
     check_port,
     watch_parent,
 )
@@ -153,6 +154,10 @@ def invalid_arguments(args: argparse.Namespace) -> list[str]:
             check_locator(router, "--router")
         except InvalidOptionError as exc:
             problems.append(str(exc))
+    try:
+        check_listen_host(args.host, "--host")
+    except InvalidOptionError as exc:
+        problems.append(str(exc))
     if not 0 <= args.busy_poll <= MAX_BUSY_POLL_US:
         problems.append(
             f"--busy-poll must be in 0..{MAX_BUSY_POLL_US:g} microseconds, got {args.busy_poll:g}"

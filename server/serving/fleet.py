@@ -31,13 +31,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.protocol.launch import check_timeout
 from neuronsmae.server.serving.probe import Probe
+from neuronsmae.server.serving.rpc import check_listen_host
 from neuronsmae.server.serving.supervisor import (
     BAD_ARGUMENTS,
     Fleet,
     FleetSpec,
     FleetStartError,
     StopFlag,
+    check_interval,
     state_path,
 )
 
@@ -208,7 +211,8 @@ def _status_main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     try:
         spec = _spec(args)
-    except ValueError as exc:
+        check_timeout(args.ping_timeout, "--ping-timeout")
+    except (ValueError, NeuronsMAEError) as exc:
         parser.error(str(exc))
     rows = status(spec, args.state_file, args.ping_timeout)
     sys.stdout.write((json.dumps(rows, indent=1) if args.json else format_status(rows)) + "\n")
@@ -227,30 +231,33 @@ def _run_main(argv: list[str]) -> int:
             log_level=args.server_log_level,
             arenas=args.arenas,
         )
+        check_timeout(args.ping_timeout, "--ping-timeout")
+        check_interval(args.interval)
+        check_listen_host(args.host, "--host")
+        fleet = Fleet(spec, args.log_dir, args.state_file, args.ping_timeout, args.max_missed)
     except (ValueError, NeuronsMAEError) as exc:
         parser.error(str(exc))
     stop = StopFlag()
     stop.install()
-    fleet = Fleet(spec, args.log_dir, args.state_file, args.ping_timeout, args.max_missed)
-    with fleet:
-        try:
+    try:
+        with fleet:
             fleet.start(stop=stop)
-        except FleetStartError as exc:
-            log.error("%s", exc)
-            return BAD_ARGUMENTS
-        if not stop.set:
-            ports = f"{spec.base_port}..{spec.base_port + spec.count - 1}"
-            log.info(
-                "serving %d arenas (%d servers × %d) on %s ports %s; logs in %s; state in %s",
-                spec.count * spec.arenas,
-                spec.count,
-                spec.arenas,
-                spec.host,
-                ports,
-                fleet.log_dir,
-                fleet.state_file,
-            )
-            fleet.run(stop, args.interval)
+            if not stop.set:
+                ports = f"{spec.base_port}..{spec.base_port + spec.count - 1}"
+                log.info(
+                    "serving %d arenas (%d servers × %d) on %s ports %s; logs in %s; state in %s",
+                    spec.count * spec.arenas,
+                    spec.count,
+                    spec.arenas,
+                    spec.host,
+                    ports,
+                    fleet.log_dir,
+                    fleet.state_file,
+                )
+                fleet.run(stop, args.interval)
+    except FleetStartError as exc:
+        log.error("%s", exc)
+        return BAD_ARGUMENTS
     log.info("all servers stopped (%d restarts)", fleet.restarts)
     return 0
 

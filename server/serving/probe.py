@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 
 from neuronsmae.protocol.errors import MalformedMessageError, NeuronsMAEError
+from neuronsmae.protocol.launch import check_timeout
 from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import ErrorReply, Ping, decode_reply, encode_request
 
@@ -35,7 +36,8 @@ class Health:
 
 
 class Probe:
-    """Pings the server on ``host:port`` (or on ``port`` through ``router``).
+    """Pings the server on ``host:port`` (or on ``port`` through ``router``), waiting up to
+    ``timeout`` seconds for each answer (InvalidOptionError unless finite and > 0).
 
     The session is opened on the first ping and kept while the server answers; it is
     closed after a failed ping so the next one starts afresh (in client mode a session
@@ -45,6 +47,7 @@ class Probe:
     def __init__(
         self, host: str, port: int, router: str | None = None, timeout: float = 1.0
     ) -> None:
+        check_timeout(timeout, "ping timeout")
         self.port, self.timeout = port, timeout
         self._link = Link(WILDCARDS.get(host, host), port, router)
         self._request = encode_request(Ping(), "neuronsmae-probe")

@@ -21,7 +21,7 @@ from types import FrameType
 
 import zenoh
 
-from neuronsmae.protocol.errors import MessageTooLargeError, NeuronsMAEError
+from neuronsmae.protocol.errors import InvalidOptionError, MessageTooLargeError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_REQUEST_BYTES, ErrorReply, encode_reply, rpc_key
 from neuronsmae.protocol.transport import endpoint, server_config
 from neuronsmae.server.serving.service import ArenaService
@@ -71,22 +71,55 @@ class StopSignal:
             self._interruptible = True
 
 
+def _bind_probe(host: str, port: int) -> None:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        probe.bind((host.strip("[]"), port))
+
+
+def check_listen_host(host: object, name: str = "host") -> None:
+    """Raise InvalidOptionError unless ``host`` is an address of this machine a server can
+    listen on (a name that resolves to one counts; ``0.0.0.0`` means every address).
+
+    Why check first: Zenoh reports such a host only once the arenas are built, as a bare
+    ``Name or service not known`` (or a parse error, for an empty host) naming no argument.
+    """
+    examples = "such as 127.0.0.1 (0.0.0.0: every address)"
+    if not isinstance(host, str) or not host.strip("[]"):
+        raise InvalidOptionError(
+            f"{name} must be an address of this machine {examples}, got {host!r}"
+        )
+    try:
+        _bind_probe(host, 0)
+    except socket.gaierror as exc:
+        raise InvalidOptionError(
+            f"{name} {host!r} does not resolve ({exc.strerror}); give an address of this "
+            f"machine {examples}"
+        ) from exc
+    except OSError as exc:
+        if exc.errno == errno.EADDRNOTAVAIL:
+            raise InvalidOptionError(
+                f"{name} {host!r} is not an address of this machine; give one of its own {examples}"
+            ) from exc
+        raise
+
+
 def check_port(host: str, port: int) -> None:
-    """Raise PortInUseError if something already listens on ``host:port``.
+    """Raise PortInUseError if something already listens on ``host:port`` (and
+    InvalidOptionError if ``host`` is no address to listen on, see :func:`check_listen_host`).
 
     Zenoh's own bind failure is caught too (see :class:`RpcServer`); checking first gives a
     clear message before the slow arena build rather than after it. SO_REUSEADDR makes the
     probe ignore connections lingering in TIME_WAIT, so only a live listener counts.
     """
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((host.strip("[]"), port))
-        except OSError as exc:
-            if exc.errno == errno.EADDRINUSE:
-                raise PortInUseError(f"port {port} on {host} is already in use") from exc
-            raise
+    check_listen_host(host)
+    try:
+        _bind_probe(host, port)
+    except OSError as exc:
+        if exc.errno == errno.EADDRINUSE:
+            raise PortInUseError(f"port {port} on {host} is already in use") from exc
+        raise
 
 
 def watch_parent(parent_pid: int, period: float = 0.25) -> None:

@@ -35,6 +35,8 @@ STARTUP_TIMEOUT = 180.0
 """Seconds a server may take to answer its first ping (imports, JIT cache, arena build)."""
 STOP_TIMEOUT = 10.0
 MAX_BACKOFF = 30.0
+MIN_INTERVAL = 0.1
+"""Shortest time between two supervision passes, in seconds: shorter is a busy loop of pings."""
 BAD_ARGUMENTS = 2
 """The server's exit status for a taken port or bad arguments: restarting cannot help."""
 
@@ -115,6 +117,11 @@ class Fleet:
         ping_timeout: float = 1.0,
         max_missed: int = 0,
     ) -> None:
+        if not (isinstance(max_missed, int) and max_missed >= 0):
+            raise InvalidOptionError(
+                f"max_missed must be an integer >= 0 (0: restart only when a server exits), "
+                f"got {max_missed!r}"
+            )
         self.spec = spec
         default_logs = Path(tempfile.gettempdir()) / f"neuronsmae-serve-{spec.base_port}"
         self.log_dir = log_dir or default_logs
@@ -132,7 +139,14 @@ class Fleet:
     # ---- lifecycle ---------------------------------------------------------------------
 
     def __enter__(self) -> Fleet:
-        self.log_dir.mkdir(parents=True, exist_ok=True)
+        """Create the log folder (FleetStartError when it cannot be one)."""
+        try:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FleetStartError(
+                f"log_dir {self.log_dir}: cannot be a folder for the servers' logs "
+                f"({exc.strerror or exc})"
+            ) from exc
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -150,6 +164,8 @@ class Fleet:
             except PortInUseError as exc:
                 msg = f"{exc}; stop what uses it or pick another --base-port"
                 raise FleetStartError(msg) from exc
+            except InvalidOptionError as exc:
+                raise FleetStartError(str(exc)) from exc
         first, rest = self.members[:1], self.members[1:]
         for group in (first, rest):
             if stop is not None and stop.set:
@@ -247,7 +263,9 @@ class Fleet:
         return health
 
     def run(self, stop: StopFlag, interval: float = 2.0) -> None:
-        """Supervise until ``stop`` is set, checking every ``interval`` seconds."""
+        """Supervise until ``stop`` is set, checking every ``interval`` seconds (finite,
+        at least :data:`MIN_INTERVAL`)."""
+        check_interval(interval)
         while not stop.set:
             self.check()
             stop.sleep(interval)
@@ -317,8 +335,19 @@ class Fleet:
         tmp.replace(self.state_file)  # atomic: ``status`` never reads half a file
 
 
+def check_interval(interval: object) -> None:
+    """Refuse a supervision interval that is not a finite number of seconds >=
+    :data:`MIN_INTERVAL`, naming it."""
+    number = isinstance(interval, (int, float)) and not isinstance(interval, bool)
+    if not (number and MIN_INTERVAL <= interval < math.inf):  # type: ignore[operator]
+        raise InvalidOptionError(
+            f"interval must be a finite number of seconds >= {MIN_INTERVAL}, got {interval!r}"
+        )
+
+
 class FleetStartError(NeuronsMAEError):
-    """A server of the fleet exited during startup (its port is taken, or bad arguments)."""
+    """The fleet cannot start: a port is taken, the host or the log folder is unusable, or a
+    server exited during startup (bad arguments)."""
 
     code = "fleet_start"
 

@@ -143,6 +143,12 @@ def test_bad_count_is_a_usage_error() -> None:
         (["--time-scale", "-2"], "time_scale must be a finite number >= 0"),
         (["--arenas", "65"], "arenas must be an integer in [1, 64], got 65"),
         (["--router", "10.0.0.1:7447"], "router must be a Zenoh locator <protocol>/<address>"),
+        (["--interval", "0"], "interval must be a finite number of seconds >= 0.1, got 0.0"),
+        (["--interval", "nan"], "interval must be a finite number of seconds >= 0.1, got nan"),
+        (["--ping-timeout", "0"], "--ping-timeout must be a finite number of seconds > 0"),
+        (["--ping-timeout", "nan"], "--ping-timeout must be a finite number of seconds > 0"),
+        (["--host", "192.0.2.1"], "--host '192.0.2.1' is not an address of this machine"),
+        (["--host", ""], "--host must be an address of this machine"),
     ],
 )
 def test_bad_server_settings_are_usage_errors_before_any_server_starts(
@@ -178,3 +184,24 @@ def test_bad_ports_name_both_flags(capsys: pytest.CaptureFixture[str]) -> None:
         main(["status", "--base-port", "65535", "--count", "3"])
     assert exc.value.code == 2
     assert "--base-port 65535 --count 3" in capsys.readouterr().err
+
+
+def test_bad_supervision_settings_are_refused_before_any_server_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--base-port", str(free_ports()), "--max-missed", "-1"])
+    assert exc.value.code == 2
+    assert "max_missed must be an integer >= 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["status", "--ping-timeout", "nan"])
+    assert exc.value.code == 2
+    assert "--ping-timeout must be a finite number of seconds > 0" in capsys.readouterr().err
+    a_file = tmp_path / "logs"
+    a_file.write_text("not a folder")
+    state = tmp_path / "state.json"
+    argv = ["--base-port", str(free_ports()), "--log-dir", str(a_file), "--state-file", str(state)]
+    assert main(argv) == 2
+    assert not state.exists()  # nothing was started
+    with pytest.raises(FleetStartError, match="cannot be a folder for the servers' logs"):
+        Fleet(FleetSpec(base_port=free_ports()), a_file).__enter__()

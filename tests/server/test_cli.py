@@ -37,6 +37,9 @@ def test_defaults_are_valid() -> None:
             "--router must be a Zenoh locator <protocol>/<address> such as tcp/10.0.0.1:7447, "
             "got 'h:7447'",
         ),
+        (["--host", ""], "--host must be an address of this machine such as 127.0.0.1"),
+        (["--host", "nohost.invalid"], "--host 'nohost.invalid' does not resolve"),
+        (["--host", "192.0.2.1"], "--host '192.0.2.1' is not an address of this machine"),
     ],
 )
 def test_bad_argument_is_refused_by_name(
