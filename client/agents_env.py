@@ -50,7 +50,7 @@ from gymnasium import spaces
 from neuronsmae.client.gym_env import AGENTS_ENV_ID, EpisodeSpec
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import per_agent_actions, reset_contexts
+from neuronsmae.client.spaces import face_contexts, per_agent_actions, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 
 
@@ -76,7 +76,7 @@ class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Seque
         Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
                         **kwargs)  # fmt: skip
         self.render_mode = render_mode
-        self.contexts = dict(contexts or {})
+        self.contexts = face_contexts(contexts)
         self.arena, self.layout, seeded = open_face(env, seed, kwargs, render_mode, "AgentsEnv")
         layout = self.layout
         self._first_seed = FirstSeed(seeded)

@@ -47,7 +47,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import Layout, reset_contexts
+from neuronsmae.client.spaces import Layout, face_contexts, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
@@ -141,7 +141,7 @@ class CoopEnv(EpisodeSpec, Recipe, gymnasium.Env[np.ndarray, np.ndarray]):
         Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
                         **kwargs)  # fmt: skip
         self.render_mode = render_mode
-        self.contexts = dict(contexts or {})
+        self.contexts = face_contexts(contexts)
         self.arena, self.layout, seeded = open_face(
             env, seed, kwargs, render_mode, "CoopEnv", _coop
         )

@@ -52,7 +52,7 @@ from pettingzoo.utils.env import AECEnv, ParallelEnv
 
 from neuronsmae.client.infos import copy_info, start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import reset_contexts
+from neuronsmae.client.spaces import face_contexts, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 
@@ -95,7 +95,7 @@ class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
         Recipe.__init__(self, env=env, seed=seed, render_mode=render_mode, contexts=contexts,
                         masks=masks, remove_dead=remove_dead, **kwargs)  # fmt: skip
         self.render_mode = render_mode
-        self.contexts = dict(contexts or {})
+        self.contexts = face_contexts(contexts)
         self.masks, self.remove_dead = masks, bool(remove_dead)
         self.arena, self.layout, seeded = open_face(
             env, seed, kwargs, render_mode, "ArenaParallelEnv"

@@ -44,7 +44,7 @@ import numpy as np
 from neuronsmae.client.gym_env import _coop
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
-from neuronsmae.client.spaces import Layout, per_agent_actions
+from neuronsmae.client.spaces import Layout, face_contexts, per_agent_actions
 from neuronsmae.client.viewer import Renderer
 from neuronsmae.protocol.errors import InvalidOptionError
 
@@ -73,7 +73,7 @@ class SMACEnv(Recipe):
     ) -> None:
         Recipe.__init__(self, env=env, seed=seed, contexts=contexts, render_mode=render_mode,
                         **kwargs)  # fmt: skip
-        self.contexts = dict(contexts or {})
+        self.contexts = face_contexts(contexts)
         self.arena, self.layout, seeded = open_face(env, seed, kwargs, render_mode, "SMACEnv",
                                                     _smac)  # fmt: skip
         self._seed = seed

@@ -128,8 +128,7 @@ def open_arena(
         arena = resolve(env)(**kwargs, **seeded)  # type: ignore[arg-type]
         return _checked(arena, ArenaAPI, env), seed is not None
     _refuse_beside(kwargs, seed)
-    arena = env if isinstance(env, ArenaAPI) else env()
-    return _checked(arena, ArenaAPI, env), True
+    return _given(env, ArenaAPI), True
 
 
 def open_vec_arena(
@@ -155,8 +154,7 @@ def open_vec_arena(
         made = resolve(env)(num_envs=num_envs, **kwargs, **seeded)  # type: ignore[arg-type]
         return _checked(made, VecArenaAPI, env), seed is not None
     _refuse_beside(kwargs, seed)
-    vec = env if isinstance(env, VecArenaAPI) else env()
-    vec = _checked(vec, VecArenaAPI, env)
+    vec = _given(env, VecArenaAPI)
     if vec.num_envs != num_envs:
         vec.close()
         raise InvalidOptionError(f"num_envs={num_envs} but env holds {vec.num_envs} arenas")
@@ -177,6 +175,18 @@ def _refuse_beside(kwargs: Mapping[str, Any], seed: int | None) -> None:
             f"options {given} only configure an arena the face builds (env=None or a "
             "'module:attr' name); pass them to the arena (or factory) you give as env instead"
         )
+
+
+def _given(env: Any, kind: type) -> Any:
+    """The arena the caller gave as ``env``: the arena itself or what its factory builds."""
+    if isinstance(env, kind):
+        return env
+    if not callable(env):
+        raise InvalidOptionError(
+            f"env must be an {kind.__name__}, a zero-argument factory of one, a 'module:attr' "
+            f"name of an arena class, or None (a private served arena), got {env!r:.80}"
+        )
+    return _checked(env(), kind, env)
 
 
 def _checked(arena: Any, kind: type, source: Any) -> Any:

@@ -253,6 +253,19 @@ and PettingZoo expect of an environment (``pettingzoo.test.parallel_api_test`` p
 one of its own)."""
 
 
+def face_contexts(contexts: Any) -> dict[str, Any]:
+    """A face's own contexts (its ``contexts=`` argument, applied at every reset) as a
+    dict; None is none, anything but a mapping an ``InvalidOptionError``. Their keys and
+    values are checked by the arena at the first reset, against its context table."""
+    if contexts is None:
+        return {}
+    if not isinstance(contexts, Mapping):
+        raise InvalidOptionError(
+            f"contexts must be a dict of context names to values, got {contexts!r:.80}"
+        )
+    return dict(contexts)
+
+
 def reset_contexts(base: Mapping[str, Any], options: Any) -> dict[str, Any]:
     """The contexts of an episode: the face's own ``base`` updated by
     ``options["contexts"]``. ``options`` that is not None or a mapping, or contexts that

@@ -37,7 +37,7 @@ from gymnasium.vector.utils import batch_space
 from neuronsmae.client.gym_env import ENV_ID, EpisodeSpec, _coop
 from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import FirstSeed, open_vec_arena
-from neuronsmae.client.spaces import Layout, reset_contexts
+from neuronsmae.client.spaces import Layout, face_contexts, reset_contexts
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import VecArenaAPI
 
@@ -72,7 +72,7 @@ class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 "use render_mode=None, or render one gymnasium.make(...) environment"
             )
         self.render_mode = None
-        self.contexts = dict(contexts or {})
+        self.contexts = face_contexts(contexts)
         self.vec, seeded = open_vec_arena(env, seed, num_envs, kwargs, "CoopVectorEnv")
         try:
             self.layout = layout = Layout.of(self.vec)

@@ -3,6 +3,7 @@ rendering, registration, and parity over RM."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import warnings
@@ -457,3 +458,28 @@ def test_bad_reset_options_are_refused_by_every_face(options: Any, said: str) ->
     finally:
         for face in faces:
             face.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "said"),
+    [
+        ({"env": "neuronsmae.server:Arena", "contexts": 3}, "contexts must be a dict of context"),
+        ({"env": 3}, "env must be an ArenaAPI, a zero-argument factory of one, a 'module:attr'"),
+    ],
+)
+def test_a_bad_env_or_contexts_argument_is_refused_by_every_face(
+    kwargs: dict[str, Any], said: str
+) -> None:
+    """``contexts=3`` was a TypeError and ``env=3`` "'int' object is not callable"."""
+    from neuronsmae.client.agents_env import AgentsEnv
+    from neuronsmae.client.pz_env import ArenaParallelEnv
+    from neuronsmae.client.smac import SMACEnv
+    from neuronsmae.client.vec_env import CoopVectorEnv
+
+    for face in (CoopEnv, AgentsEnv, ArenaParallelEnv, SMACEnv):
+        with pytest.raises(InvalidOptionError, match=re.escape(said)):
+            face(**kwargs)
+    vec_said = said.replace("ArenaAPI", "VecArenaAPI")
+    vec_kwargs = {**kwargs, "env": "neuronsmae.server:VecArena"} if "contexts" in kwargs else kwargs
+    with pytest.raises(InvalidOptionError, match=re.escape(vec_said)):
+        CoopVectorEnv(num_envs=2, **vec_kwargs)
