@@ -183,8 +183,9 @@ def keep_logs(run_dir: Path, out: Path, learner: str) -> Path:
 def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[str, Any]:
     run_dir = args.runs / args.learner / f"{alg}_{level}_s{seed}"
     cfg = cell_config(args, alg, level, seed, run_dir)
-    if cfg.max_minutes > 0 and run_dir.exists():
-        # A time budget is per session: a resumed run would train past it. Start afresh.
+    if run_dir.exists() and (cfg.max_minutes > 0 or not (run_dir / CHECKPOINT_NAME).is_file()):
+        # A time budget is per session: a resumed run would train past it; a run stopped
+        # before its first checkpoint cannot be continued. Either starts afresh.
         shutil.rmtree(run_dir)
     resume = (run_dir / CHECKPOINT_NAME).is_file()
     if resume:

@@ -37,6 +37,7 @@ from neuronsmae.trainers.config import (
     read_config_file,
 )
 from neuronsmae.trainers.mixers import ALGORITHMS
+from neuronsmae.trainers.records import check_new_run_dir
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -114,6 +115,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     cfg = make_config(*layers, base=base)
     if cfg.run_dir.exists() and not cfg.run_dir.is_dir():
         raise ConfigError(f"out {str(cfg.run_dir)!r} exists and is not a directory")
+    if not args.resume:
+        check_new_run_dir(cfg.run_dir)
     return cfg
 
 

@@ -22,6 +22,10 @@ from typing import Any
 
 from tqdm import tqdm
 
+from neuronsmae.trainers.config_groups import ConfigError
+
+RUN_FILES = ("config.json", "checkpoint.pt", "best.pt", "train.csv", "eval.csv", "episodes.csv")
+"""The files a run writes in its directory: their presence means a run is there."""
 PERMILLE = 1000
 """The bar's resolution: thousandths of the binding budget."""
 TRAIN_COLUMNS = (
@@ -104,6 +108,27 @@ def _clock(seconds: float) -> str:
         if minutes >= 60
         else f"{minutes}:{secs:02d}"
     )
+
+
+class RunExistsError(ConfigError):
+    """A new run was pointed at a directory that holds another run's records."""
+
+
+def check_new_run_dir(run_dir: Path) -> None:
+    """Refuse to start a new run in a directory that holds a run already.
+
+    Why: a second run there would overwrite the first one's config and checkpoint and
+    append its episodes to the same CSV files under the same episode numbers, leaving a
+    record of neither. Continuing a run is ``--resume`` (``train(cfg, resume=True)``).
+    """
+    if not run_dir.is_dir():
+        return
+    found = [name for name in RUN_FILES if (run_dir / name).exists()]
+    if found:
+        raise RunExistsError(
+            f"{run_dir} already holds a run ({', '.join(found)}): pass --resume to continue "
+            "it, another --out (or --seed) for a new run, or remove the directory"
+        )
 
 
 class _Csv:

@@ -56,7 +56,7 @@ from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement, start_ray
-from neuronsmae.trainers.records import Recorder
+from neuronsmae.trainers.records import Recorder, check_new_run_dir
 from neuronsmae.trainers.rollout import Policy, Request
 from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
@@ -111,6 +111,8 @@ class Trainer:
         extra test sets."""
         self.best: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
         """Acting weights of the best validation evaluation, and that evaluation's row."""
+        if not resume:
+            check_new_run_dir(self.run_dir)
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             start_ray(cfg)

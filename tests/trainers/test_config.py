@@ -237,6 +237,27 @@ def test_an_out_that_is_a_file_is_refused_before_training(
     assert "exists and is not a directory" in capsys.readouterr().err
 
 
+def test_a_new_run_is_refused_a_directory_holding_another_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Running the same command twice overwrote the first run's config and checkpoint and
+    appended its episodes to the same CSV files under the same episode numbers."""
+    from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME
+    from neuronsmae.trainers.records import RUN_FILES, check_new_run_dir
+    from neuronsmae.trainers.train import BEST_NAME
+
+    assert {CHECKPOINT_NAME, BEST_NAME} <= set(RUN_FILES)
+    check_new_run_dir(tmp_path / "absent")
+    check_new_run_dir(tmp_path)  # an empty folder, or one holding other things, is fine
+    (tmp_path / "notes.txt").write_text("mine")
+    check_new_run_dir(tmp_path)
+    (tmp_path / "episodes.csv").write_text("episode\n1\n")
+    assert main(["--out", str(tmp_path), "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path} already holds a run (episodes.csv): pass --resume to continue" in err
+    assert (tmp_path / "episodes.csv").read_text() == "episode\n1\n"
+
+
 def test_cli_layers_flags_win_over_set_and_file(tmp_path: Path) -> None:
     f = tmp_path / "c.json"
     f.write_text(json.dumps({"alg": "iql", "lr": 0.002, "seed": 4}))
