@@ -28,6 +28,42 @@ class IncompleteEpisodeError(ValueError):
     """An episode with missing steps, inconsistent shapes or no terminal step."""
 
 
+class ReplayMemoryError(ValueError):
+    """A replay buffer larger than the memory this machine has available."""
+
+
+def episode_arrays(
+    n_agents: int, obs_dim: int, state_dim: int, n_actions: int, episode_limit: int
+) -> dict[str, tuple[tuple[int, ...], type[np.generic]]]:
+    """Each array the buffer stores per episode: its shape (padded to ``episode_limit``
+    decisions) and dtype."""
+    t, n = episode_limit, n_agents
+    return {
+        "obs": ((t + 1, n, obs_dim), np.float32),
+        "state": ((t + 1, state_dim), np.float32),
+        "avail": ((t + 1, n, n_actions), np.bool_),
+        "alive": ((t + 1, n), np.float32),
+        "actions": ((t, n), np.int64),
+        "rewards": ((t,), np.float32),
+        "terminated": ((t,), np.float32),
+        "filled": ((t,), np.float32),
+        "lengths": ((), np.int64),
+    }
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux's ``MemAvailable``), or None
+    where the system does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 @dataclass
 class Episode:
     """One finished episode of ``L`` decisions for ``n`` agents (unpadded).
@@ -129,16 +165,24 @@ class EpisodeReplayBuffer:
             raise ValueError(f"buffer capacity must be ≥ 1, got {capacity}")
         self.capacity = capacity
         self.dims = (n_agents, obs_dim, state_dim, n_actions, episode_limit)
-        steps = episode_limit
-        self.obs = np.zeros((capacity, steps + 1, n_agents, obs_dim), np.float32)
-        self.state = np.zeros((capacity, steps + 1, state_dim), np.float32)
-        self.avail = np.zeros((capacity, steps + 1, n_agents, n_actions), np.bool_)
-        self.alive = np.zeros((capacity, steps + 1, n_agents), np.float32)
-        self.actions = np.zeros((capacity, steps, n_agents), np.int64)
-        self.rewards = np.zeros((capacity, steps), np.float32)
-        self.terminated = np.zeros((capacity, steps), np.float32)
-        self.filled = np.zeros((capacity, steps), np.float32)
-        self.lengths = np.zeros(capacity, np.int64)
+        arrays = episode_arrays(*self.dims)
+        per_episode = sum(
+            int(np.prod(shape)) * np.dtype(d).itemsize for shape, d in arrays.values()
+        )
+        available = available_memory()
+        if available is not None and capacity * per_episode > available:
+            # NumPy's zeros are allocated lazily: without this the run would be killed only
+            # once the buffer filled, hours in.
+            raise ReplayMemoryError(
+                f"{capacity} episodes of replay need {capacity * per_episode / 2**30:.1f} GiB "
+                f"({per_episode / 2**10:.0f} KiB each for this task) and this machine has "
+                f"{available / 2**30:.1f} GiB available; at most "
+                f"{available // per_episode} episodes fit"
+            )
+        z = {k: np.zeros((capacity, *shape), dtype) for k, (shape, dtype) in arrays.items()}
+        self.obs, self.state, self.avail, self.alive = z["obs"], z["state"], z["avail"], z["alive"]
+        self.actions, self.rewards = z["actions"], z["rewards"]
+        self.terminated, self.filled, self.lengths = z["terminated"], z["filled"], z["lengths"]
         self.next_slot = 0
         self.size = 0
         self.added = 0

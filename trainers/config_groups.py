@@ -24,6 +24,11 @@ SERVER_PLACEMENTS = ("local", "actors")
 """``remote``: where each worker's server runs (see ``trainers/placement.py``)."""
 
 
+MAX_WIDTH = 4096
+"""Widest layer a learner's network may have (the paper's widest is 128; 4096 already makes a
+GRU of 100 million weights)."""
+
+
 class ConfigError(ValueError):
     """An unknown key, a value of the wrong type, or a value out of range."""
 
@@ -85,7 +90,8 @@ class LearnerConfig:
     eps_end: float = 0.05
     """Final exploration ε in [0, 1] (paper: 0.05)."""
     eps_anneal_episodes: int = 1500
-    """Training episodes over which ε falls linearly from eps_start to eps_end."""
+    """Training episodes over which ε falls linearly from eps_start to eps_end, ≥ 0 (0: ε
+    is eps_end from the first episode)."""
     target_update_interval: int = 100
     """Gradient updates between hard target refreshes, ≥ 1 (100 = every 50 episodes at the
     default 2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100
@@ -94,11 +100,11 @@ class LearnerConfig:
     grad_clip: float = 10.0
     """Largest gradient norm of an update, > 0; larger ones are scaled down to it (paper: 10)."""
     agent_hidden: int = 128
-    """GRU width of the shared agent network (paper: 128)."""
+    """GRU width of the shared agent network, in [1, MAX_WIDTH] (paper: 128)."""
     mixer_embed: int = 32
-    """QMIX mixing-layer width (paper: 32)."""
+    """QMIX mixing-layer width, in [1, MAX_WIDTH] (paper: 32)."""
     hypernet_hidden: int = 64
-    """QMIX hypernetwork hidden width."""
+    """QMIX hypernetwork hidden width, in [1, MAX_WIDTH]."""
     td_lambda: float = 0.3
     """λ of the TD(λ) targets in [0, 1] (0: the paper's one-step targets; PyMARL2 uses 0.6).
     Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
@@ -132,11 +138,13 @@ class LearnerConfig:
     agent_id_input: bool = True
     """Give the agent network its one-hot agent index."""
     buffer_size: int = 5000
-    """Replay capacity in episodes."""
+    """Replay capacity in episodes, ≥ 1. A run refuses a buffer larger than the memory its
+    machine has available, naming the size of one episode for its task (tens of KiB on the
+    default 2 v 2)."""
     batch_size: int = 32
-    """Episodes per gradient update."""
+    """Episodes per gradient update, in [1, buffer_size]."""
     learning_starts: int = 64
-    """Episodes in the buffer before learning begins."""
+    """Episodes in the buffer before learning begins, ≥ 0."""
     train_every: int = 1
     """Asynchronous mode: episodes collected between training rounds."""
     updates_per_round: int = 2
@@ -159,6 +167,16 @@ class LearnerConfig:
             "target_update_interval", "agent_hidden", "mixer_embed", "hypernet_hidden",
         )  # fmt: skip
         check_finite(self)
+        for name in ("eps_anneal_episodes", "learning_starts"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name} must be ≥ 0, got {getattr(self, name)}")
+        for name in ("agent_hidden", "mixer_embed", "hypernet_hidden"):
+            if getattr(self, name) > MAX_WIDTH:
+                raise ConfigError(f"{name} must be in [1, {MAX_WIDTH}], got {getattr(self, name)}")
+        if self.batch_size > self.buffer_size:
+            raise ConfigError(
+                f"batch_size must be in [1, buffer_size={self.buffer_size}], got {self.batch_size}"
+            )
         for name in ("lr", "grad_clip"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")

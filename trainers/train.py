@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import random
 import time
 from collections import deque
@@ -39,7 +40,7 @@ import torch
 from neuronsmae.protocol import EnvInfo, InvalidContextError
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.agent import epsilon_at
-from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer
+from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer, ReplayMemoryError
 from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
     Counters,
@@ -92,6 +93,12 @@ class Trainer:
         )
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
+        cores = os.cpu_count() or 1
+        if cfg.torch_threads > cores:
+            raise ConfigError(
+                f"torch_threads={cfg.torch_threads}: the learner's machine has {cores} cores; "
+                f"give 1 to {cores}"
+            )
         torch.set_num_threads(cfg.torch_threads)
         self.competition = Competition(cfg)
         self.mode = "competitive" if self.competition.competitive else "cooperative"
@@ -174,14 +181,17 @@ class Trainer:
             td_lambda=cfg.learner.td_lambda,
         )
         self.group = task_group(parse_generators(lc.augment), lc.features, info)
-        self.buffer = EpisodeReplayBuffer(
-            cfg.learner.buffer_size,
-            self.env.n_agents,
-            self.env.obs_dim,
-            self.env.state_dim,
-            self.env.n_actions,
-            self.env.episode_limit,
-        )
+        try:
+            self.buffer = EpisodeReplayBuffer(
+                cfg.learner.buffer_size,
+                self.env.n_agents,
+                self.env.obs_dim,
+                self.env.state_dim,
+                self.env.n_actions,
+                self.env.episode_limit,
+            )
+        except ReplayMemoryError as err:
+            raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
 
     def _check_contexts(self) -> None:
         """Reset a worker's arenas with every value the contexts can take, so a key or a

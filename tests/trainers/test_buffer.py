@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 import torch
 
-from neuronsmae.trainers.buffer import EpisodeReplayBuffer, IncompleteEpisodeError
+from neuronsmae.trainers import buffer as buffer_module
+from neuronsmae.trainers.buffer import (
+    EpisodeReplayBuffer,
+    IncompleteEpisodeError,
+    ReplayMemoryError,
+)
 
 from .conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode
 
@@ -82,3 +89,20 @@ def test_uniform_sampling_draws_with_the_generator_given() -> None:
     b = buf.sample(3, np.random.default_rng(9))
     expected = np.random.default_rng(9).choice(4, size=3, replace=False)
     assert torch.equal(b.obs, torch.from_numpy(buf.obs[expected, : b.obs.shape[1]]))
+
+
+def test_a_buffer_larger_than_the_available_memory_is_refused_with_what_fits(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """NumPy allocates the zeros lazily, so a too-large buffer failed only when it filled."""
+    one = EpisodeReplayBuffer(1, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    per_episode = sum(getattr(one, k).nbytes for k in buffer_module.episode_arrays(*one.dims))
+    monkeypatch.setattr(buffer_module, "available_memory", lambda: 10 * per_episode + 5)
+    assert EpisodeReplayBuffer(10, N_AGENTS, OBS, STATE, ACTIONS, LIMIT).capacity == 10
+    with pytest.raises(ReplayMemoryError, match=r"11 episodes of replay need .* at most 10 "):
+        EpisodeReplayBuffer(11, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    monkeypatch.setattr(buffer_module, "available_memory", lambda: None)  # not Linux: no check
+    assert EpisodeReplayBuffer(11, N_AGENTS, OBS, STATE, ACTIONS, LIMIT).capacity == 11
+    monkeypatch.undo()
+    if sys.platform == "linux":  # the real figure: MemAvailable, in bytes
+        assert 2**20 < (buffer_module.available_memory() or 0) < 2**50

@@ -120,6 +120,11 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["grad_clip=0"], "grad_clip must be > 0, got 0.0"),
         (["gamma=nan"], "gamma must be a finite number, got nan"),
         (["worker_resources=big=nan"], "expected a custom name and an amount > 0"),
+        (["eps_anneal_episodes=-1"], "eps_anneal_episodes must be ≥ 0, got -1"),
+        (["learning_starts=-1"], "learning_starts must be ≥ 0, got -1"),
+        (["agent_hidden=4097"], r"agent_hidden must be in \[1, 4096\], got 4097"),
+        (["hypernet_hidden=100000"], r"hypernet_hidden must be in \[1, 4096\]"),
+        (["buffer_size=10", "batch_size=11"], r"batch_size must be in \[1, buffer_size=10\]"),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
@@ -397,3 +402,16 @@ def test_a_bad_checkpoint_or_cluster_is_reported_without_a_traceback(
         monkeypatch.setattr(train_module, "train", refuse)
         assert main(["--out", str(tmp_path / "run"), "--episodes", "1"]) == 2
         assert str(error) in capsys.readouterr().err
+
+
+def test_more_torch_threads_than_cores_is_refused_before_ray_starts(tmp_path: Path) -> None:
+    """100,000 threads made Ray's own start time out, with a traceback naming neither."""
+    import os
+
+    from neuronsmae.trainers.train import Trainer
+
+    cores = os.cpu_count() or 1
+    cfg = make_config({"torch_threads": cores + 1, "out": str(tmp_path / "run")})
+    with pytest.raises(ConfigError, match=f"torch_threads={cores + 1}: .* give 1 to {cores}"):
+        Trainer(cfg)
+    assert not (tmp_path / "run").exists()
