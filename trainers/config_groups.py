@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.protocol.transport import check_locator
 from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
 from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
@@ -24,6 +25,8 @@ SERVER_PLACEMENTS = ("local", "actors")
 """``remote``: where each worker's server runs (see ``trainers/placement.py``)."""
 
 
+TEST_SEED_OFFSET = 10_000_000
+"""The final test's seeds start this far above ``eval_seed``, clear of any validation seed."""
 MAX_WIDTH = 4096
 """Widest layer a learner's network may have (the paper's widest is 128; 4096 already makes a
 GRU of 100 million weights)."""
@@ -223,10 +226,14 @@ class EvalConfig:
         for name, spec in self.context_specs().items():
             if not spec.fixed:
                 raise ConfigError(f"{name} must be fixed contexts (key=value entries only)")
-        if self.eval_every < 0 or self.eval_seed < 1:
+        if self.eval_every < 0:
+            raise ConfigError(f"eval_every must be ≥ 0, got {self.eval_every}")
+        top = MAX_SEED - TEST_SEED_OFFSET - max(self.eval_episodes, self.final_eval_episodes)
+        if not 1 <= self.eval_seed <= top:
             raise ConfigError(
-                f"eval_every must be ≥ 0 and eval_seed ≥ 1, got {self.eval_every} and "
-                f"{self.eval_seed}"
+                f"eval_seed must be in [1, {top}] (the test seeds run to eval_seed + "
+                f"{TEST_SEED_OFFSET} + final_eval_episodes, and a seed is at most {MAX_SEED}), "
+                f"got {self.eval_seed}"
             )
 
     def context_specs(self) -> dict[str, ContextSpec]:

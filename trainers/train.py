@@ -51,6 +51,7 @@ from neuronsmae.trainers.checkpoint import (
 )
 from neuronsmae.trainers.competition import Competition
 from neuronsmae.trainers.config import ConfigError, TrainConfig
+from neuronsmae.trainers.config_groups import TEST_SEED_OFFSET
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
@@ -63,8 +64,6 @@ from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
 from neuronsmae.trainers.task import blue_view, resolve_learner
 
-TEST_SEED_OFFSET = 10_000_000
-"""Test seeds start this far above ``eval_seed``, clear of any validation seed."""
 BEST_NAME = "best.pt"
 """File name of the best-validated weights inside the run directory (checkpoint format)."""
 
