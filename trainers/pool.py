@@ -70,6 +70,15 @@ class Member:
         return {"bot_team": "none"}
 
 
+def _exists(path: str) -> bool:
+    """Whether ``path`` names a file or folder (False for a name the system cannot even
+    look up, such as one too long)."""
+    try:
+        return Path(path).exists()
+    except (OSError, ValueError):
+        return False
+
+
 def parse_opponents(text: str) -> tuple[list[Member], bool]:
     """``"easy,runs/a/best.pt,self"`` → the fixed members and whether ``self`` is in it."""
     fixed: list[Member] = []
@@ -79,7 +88,7 @@ def parse_opponents(text: str) -> tuple[list[Member], bool]:
             self_play = True
         elif entry in LEVEL_ARGS:
             fixed.append(Member(f"bot:{entry}"))
-        elif Path(entry).exists():
+        elif _exists(entry):
             fixed.append(Member(f"ckpt:{entry}"))
         else:
             raise ConfigError(

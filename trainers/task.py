@@ -22,6 +22,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from neuronsmae.client.source import ARENA_OPTIONS
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.trainers.config_groups import ConfigError, LearnerConfig, check_choice
 from neuronsmae.trainers.symmetry import GENERATORS, parse_generators
@@ -95,7 +96,8 @@ class ArenaGroup:
     """random (the released build) or corners (the RMUA birth areas)."""
     options: str = ""
     """Any other arena options, ``key=value`` separated by ``;`` (``k=6;episode_steps=1500``;
-    names as in docs/options.md; the arena checks them when the workers start). The mode,
+    names as in docs/options.md, checked here; the arena checks their values when the
+    workers start). The mode,
     ``gui``, ``blue_level`` and the seed are the trainer's."""
 
     def __post_init__(self) -> None:
@@ -110,6 +112,12 @@ class ArenaGroup:
             raise ConfigError("arena.vector_obs and arena.lidar are both off: enable one")
         extra = parse_options(self.options)
         typed = {f.name for f in dataclasses.fields(self)} - {"options"}
+        unknown = sorted(set(extra) - ARENA_OPTIONS)
+        if unknown:
+            raise ConfigError(
+                f"arena.options sets unknown option(s) {unknown}; valid: "
+                f"{sorted(ARENA_OPTIONS - typed - set(RESERVED))} (docs/options.md)"
+            )
         taken = sorted(set(extra) & (typed | set(RESERVED)))
         if taken:
             raise ConfigError(

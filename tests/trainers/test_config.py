@@ -121,6 +121,11 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["gamma=nan"], "gamma must be a finite number, got nan"),
         (["worker_resources=big=nan"], "expected a custom name and an amount > 0"),
         (["eps_anneal_episodes=-1"], "eps_anneal_episodes must be ≥ 0, got -1"),
+        (
+            ["arena.options=k=6;coef=2"],
+            r"arena.options sets unknown option\(s\) \['coef'\]; valid:",
+        ),
+        (["opponent=" + "x" * 5000], "opponent entry 'xxx"),
         (["eval_seed=0"], r"eval_seed must be in \[1, 9223372036844775607\]"),
         (["eval_seed=9223372036844775608"], r"eval_seed must be in \[1, 9223372036844775607\]"),
         (["eval_every=-1"], "eval_every must be ≥ 0, got -1"),
