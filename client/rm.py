@@ -166,6 +166,7 @@ class RM(ArenaAPI):
         return self._call(Render()).value
 
     def close(self) -> None:
+        self._cache.clear()  # no answers from a closed client: every read says it is closed
         self._conn.close()
 
     def __enter__(self) -> RM:

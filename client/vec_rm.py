@@ -241,6 +241,7 @@ class VecRM(VecArenaAPI):
         return dict(self._info)
 
     def close(self) -> None:
+        self._cache = {}  # no answers from a closed client: every read says it is closed
         for conn in self._conns:
             conn.close()
 

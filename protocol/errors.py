@@ -121,6 +121,13 @@ class ReplayMismatchError(NeuronsMAEError):
         self.decision = decision
 
 
+class ClosedError(NeuronsMAEError, RuntimeError):
+    """An in-process arena was used after ``close()``, which released its simulation: build
+    a new one."""
+
+    code = "closed"
+
+
 class ForkedZenohError(NeuronsMAEError, RuntimeError):
     """A Zenoh session was asked for in a child forked from a process that had already
     opened one; Zenoh's runtime does not survive ``fork``. The message says how to start

@@ -95,7 +95,10 @@ class ArenaAPI(abc.ABC):
 
     @abc.abstractmethod
     def close(self) -> None:
-        """Release the arena's resources; safe to call more than once."""
+        """Release the arena's resources; safe to call more than once. Afterwards
+        ``reset``, ``step``, the ``get_*`` reads of the scene and ``render`` raise a typed
+        error: ``ClosedError`` in process, ``ServerUnavailableError`` ("is closed") from a
+        client (``get_env_info`` may still answer from what is known)."""
 
     def __enter__(self) -> ArenaAPI:
         return self
@@ -243,7 +246,8 @@ class VecArenaAPI(abc.ABC):
 
     @abc.abstractmethod
     def close(self) -> None:
-        """Release every arena (and servers this object launched); safe to repeat."""
+        """Release every arena (and servers this object launched); safe to repeat. Afterwards
+        the other calls raise a typed error, as ``ArenaAPI.close`` says."""
 
     def __enter__(self) -> VecArenaAPI:
         return self

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.env_info import EnvInfo
-from neuronsmae.protocol.errors import InvalidOptionError, ResetNeededError
+from neuronsmae.protocol.errors import ClosedError, InvalidOptionError, ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
 from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.contexts import EpisodeContext, check_seed, parse_contexts
@@ -95,6 +95,7 @@ class Arena(ArenaAPI):
         self.t = 0
         self.done = True
         self._episodes = 0
+        self._closed = False
         self._obs: list[np.ndarray] = []
         self.context = EpisodeContext()
         self.targets = np.zeros(self.n, dtype=np.int64)
@@ -117,6 +118,7 @@ class Arena(ArenaAPI):
     def reset(
         self, contexts: Mapping[str, Any] | None = None, seed: int | None = None
     ) -> list[np.ndarray]:
+        self._need_open("reset()")
         self.context = ctx = parse_contexts(contexts)
         if seed is not None:
             self.rng = np.random.default_rng(check_seed(seed))
@@ -159,6 +161,7 @@ class Arena(ArenaAPI):
     def step(
         self, actions: Sequence[Any]
     ) -> tuple[list[np.ndarray], list[float], bool, dict[str, Any]]:
+        self._need_open("step()")
         if self.done:
             raise ResetNeededError(
                 "step() called before reset() or after the episode ended; call reset() first"
@@ -256,6 +259,7 @@ class Arena(ArenaAPI):
     def close(self) -> None:
         self.world.close()
         self.done = True
+        self._closed = True
 
     # --- checks ---------------------------------------------------------------------------
     def check_actions(self, actions: Sequence[Any]) -> list[Any]:
@@ -264,9 +268,17 @@ class Arena(ArenaAPI):
         checks every arena's row this way before it steps any arena."""
         return self.decoder.validate(actions, len(self.agents))
 
+    def _need_open(self, what: str) -> None:
+        """After ``close()`` the simulation is gone: a typed error, not PyBullet's "Not
+        connected to physics server" or the last episode's stale observations."""
+        if self._closed:
+            raise ClosedError(f"{what} on a closed arena; make a new Arena")
+
     def _need_episode(self, what: str) -> None:
         """Before the first reset there is no scene (no poses, candidate points or
-        observations): a typed error, not an arbitrary value."""
+        observations), and after ``close()`` none either: a typed error, not an arbitrary
+        value."""
+        self._need_open(what)
         if self._episodes == 0:
             raise ResetNeededError(f"{what} needs an episode: call reset() first")
 
@@ -277,6 +289,7 @@ class Arena(ArenaAPI):
         For constructed scenes (tests, tutorials, curriculum starts): wheel states and HP are
         kept, velocities zeroed; ``bullets`` optionally overrides each robot's ammunition.
         """
+        self._need_open("place()")
         if self.done:
             raise ResetNeededError("place() needs a running episode: call reset() first")
         poses = np.asarray(poses, dtype=np.float64).reshape(self.n, 3)

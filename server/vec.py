@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.errors import (
+    ClosedError,
     InvalidActionError,
     InvalidOptionError,
     NeuronsMAEError,
@@ -83,10 +84,12 @@ class VecArena(VecArenaAPI):
         self._done = np.ones(num_envs, dtype=bool)
         """Whose episode has ended (or never started): the next step resets them."""
         self._started = False
+        self._closed = False
 
     # ---- VecArenaAPI ---------------------------------------------------------------------
 
     def reset(self, contexts: ContextsArg = None, seed: Any = None) -> np.ndarray:
+        self._need_open("reset()")
         k = self.num_envs
         per_contexts = self._contexts_per_arena(contexts)
         seeds = self._seeds_per_arena(seed)
@@ -105,8 +108,7 @@ class VecArena(VecArenaAPI):
         contexts: Sequence[Mapping[str, Any] | None] | None = None,
         active: Sequence[bool] | np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
-        if not self._started:
-            raise ResetNeededError("step() called before reset(): call reset() first")
+        self._need_reset("step()")
         k = self.num_envs
         rows = self._rows(actions)
         on = self._flags(active)
@@ -150,12 +152,18 @@ class VecArena(VecArenaAPI):
         return dict(self._info)
 
     def close(self) -> None:
+        self._closed = True
         for arena in self.arenas:
             arena.close()
 
     # ---- helpers -------------------------------------------------------------------------
 
+    def _need_open(self, what: str) -> None:
+        if self._closed:
+            raise ClosedError(f"{what} on closed arenas; make a new VecArena")
+
     def _need_reset(self, what: str) -> None:
+        self._need_open(what)
         if not self._started:
             raise ResetNeededError(f"{what} needs an episode: call reset() first")
 

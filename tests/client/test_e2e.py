@@ -233,6 +233,8 @@ def test_second_client_is_refused_until_the_owner_closes(server_a: Server) -> No
         with pytest.raises(BusyError, match="owned by another client"):
             RM(seed=3, port=server_a.port, launch=False)
         first.reset()
+    with pytest.raises(ServerUnavailableError, match="is closed"):
+        first.get_obs()  # not the last reply's observations
     with RM(seed=3, port=server_a.port, launch=False) as second:
         assert same(second.reset(), Arena(seed=3).reset())
 

@@ -188,6 +188,9 @@ def test_private_servers_run_side_by_side_and_stop_on_close() -> None:
         first.close()
         second.close()
     assert [p.wait(5) for p in procs] == [0, 0, 0]  # each stopped cleanly on close
+    for read in (first.get_obs, first.get_state, first.reset):  # not the last reply's arrays
+        with pytest.raises(ServerUnavailableError, match="is closed"):
+            read()
 
 
 def test_a_killed_vector_server_gives_a_typed_error_within_the_timeout(

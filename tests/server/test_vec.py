@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from neuronsmae.protocol.errors import (
+    ClosedError,
     InvalidActionError,
     InvalidContextError,
     InvalidOptionError,
@@ -179,3 +180,21 @@ def test_reads_and_steps_before_the_first_reset_are_typed_errors() -> None:
 def test_the_arena_count_is_checked(bad: object) -> None:
     with pytest.raises(InvalidOptionError, match="num_envs"):
         VecArena(num_envs=bad)  # type: ignore[arg-type]
+
+
+def test_arenas_used_after_close_raise_a_typed_error() -> None:
+    """After close() reset was PyBullet's "Not connected to physics server", step a
+    misleading ResetNeededError and get_obs the last episode's observations."""
+    one, vec = Arena(seed=0), VecArena(seed=0, num_envs=2)
+    one.reset()
+    vec.reset()
+    one.close()
+    vec.close()
+    for call, args in ((one.reset, ()), (one.step, ([0, 0],)), (one.get_obs, ()),
+                       (one.get_state, ()), (one.get_avail_actions, ()),
+                       (vec.reset, ()), (vec.step, (np.zeros((2, 2), np.int64),)),
+                       (vec.get_obs, ()), (vec.get_avail_actions, ())):  # fmt: skip
+        with pytest.raises(ClosedError, match=r"\(\) on (a )?closed arenas?; make a new"):
+            call(*args)
+    one.close()  # closing twice is fine
+    vec.close()
