@@ -90,9 +90,18 @@ class Setup:
     red: Side
 
 
+MATCH_OPTIONS = ("mode", "blue_level")
+"""Arena options a match sets itself from its two sides (refused in ``options``)."""
+
+
 def arrange(blue: Side, red: Side, options: Mapping[str, Any] | None = None) -> Setup:
     """The mode, arena options and contexts for ``blue`` against ``red`` (module docstring):
     the policies' training options, then ``options`` over them."""
+    taken = sorted(set(options or {}) & set(MATCH_OPTIONS))
+    if taken:
+        raise InvalidOptionError(
+            f"options {taken} are the match's own: it sets them from the two sides it plays"
+        )
     given: dict[str, Any] = {}
     for side in (red, blue):  # blue's options win where both policies set one
         if side.policy is not None:
@@ -339,6 +348,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.arenas < 1:
         parser.error("--episodes and --arenas must be at least 1")
+    if args.servers is not None and args.servers < 1:
+        parser.error(f"--servers must be at least 1, got {args.servers}")
     if args.gif is not None and args.gif.suffix.lower() != ".gif":
         parser.error("--gif must name a .gif file")
     try:

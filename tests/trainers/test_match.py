@@ -48,6 +48,19 @@ def test_play_refuses_zero_arenas_instead_of_playing_one() -> None:
         M.play("easy", "easy", 2, 0, arenas=0)
 
 
+def test_options_the_match_sets_itself_and_zero_servers_are_refused(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--option mode=bots was silently overridden, and --servers 0 played on one server."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    for option in ("mode=competitive", "blue_level=easy"):
+        assert M.main(["--episodes", "1", "--option", option]) == 2
+        assert f"options ['{option.split('=')[0]}'] are the match's own" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        M.main(["--episodes", "1", "--servers", "0"])
+    assert "--servers must be at least 1, got 0" in capsys.readouterr().err
+
+
 def test_a_record_dir_that_is_a_file_is_refused_before_playing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
