@@ -57,7 +57,8 @@ def check_fork_safe() -> None:
             "this process was forked from one that had opened a Zenoh session, and Zenoh "
             "does not survive fork: create the NeuronsMAE client in a spawned process "
             "(multiprocessing context 'spawn'; gymnasium.vector.AsyncVectorEnv(..., "
-            "context='spawn')) or before the parent opens any session"
+            "context='spawn'), gymnasium.make_vec(..., vectorization_mode='async', "
+            "vector_kwargs={'context': 'spawn'})) or before the parent opens any session"
         )
 
 
