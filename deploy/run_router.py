@@ -27,6 +27,9 @@ from pathlib import Path
 
 import zenoh
 
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.transport import check_locator
+
 CONFIG = Path(__file__).resolve().parent / "zenoh-router.json5"
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
@@ -65,6 +68,11 @@ def router_config(config: Path | None, listen: Sequence[str]) -> zenoh.Config:
     return conf
 
 
+def _message(exc: BaseException) -> str:
+    """Zenoh's message on one line, without the Rust source location it appends."""
+    return " ".join(str(exc).split()).split(" at /")[0]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="run_router.py", description=__doc__.split("\n")[0])
     p.add_argument(
@@ -81,10 +89,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="listen here instead of the file's endpoints (repeatable), e.g. tcp/10.0.0.1:7447",
     )
     args = p.parse_args(argv)
+    for endpoint in args.listen:
+        try:
+            check_locator(endpoint, "--listen")
+        except InvalidOptionError as exc:
+            p.error(str(exc))
+    if args.config is not None and not args.config.is_file():
+        p.error(f"--config {args.config}: no such file")
+    try:
+        conf = router_config(args.config, args.listen)
+    except zenoh.ZError as exc:  # the file is no Zenoh configuration, or a bad endpoint
+        p.error(f"--config {args.config}: not a usable Zenoh configuration: {_message(exc)}")
     stopped: list[int] = []  # a plain list, not an Event: a handler must never take a lock
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, frame: stopped.append(signum))
-    conf = router_config(args.config, args.listen)
     endpoints = json.loads(conf.get_json("listen/endpoints"))
     if isinstance(endpoints, dict):  # per-mode form: {router: [...], peer: [...]}
         endpoints = endpoints.get("router", [])
@@ -98,7 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
-        sys.stderr.write(f"run_router.py: cannot start the router: {exc}\n")
+        sys.stderr.write(f"run_router.py: cannot start the router: {_message(exc)}\n")
         return 1
     try:
         listening = args.listen or "the configured endpoints"

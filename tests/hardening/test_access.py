@@ -100,6 +100,29 @@ def _router_module() -> ModuleType:
     return module
 
 
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--listen", "7447"], "--listen must be a Zenoh locator <protocol>/<address>"),
+        (["--config", "/nonexistent.json5"], "--config /nonexistent.json5: no such file"),
+        (["--config", "{bad}"], "not a usable Zenoh configuration: --> 1:1"),
+    ],
+)
+def test_router_refuses_bad_arguments_by_name(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """These were Zenoh's tracebacks, ending in a path into its Rust sources."""
+    if argv[1] == "{bad}":
+        bad = tmp_path / "bad.json5"
+        bad.write_text("{broken")
+        argv = ["--config", str(bad)]
+    with pytest.raises(SystemExit) as exit_:
+        _router_module().main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and ".cargo" not in err
+
+
 def test_router_listens_on_loopback_by_default() -> None:
     router = _router_module()
     for config in (None, router.CONFIG):
