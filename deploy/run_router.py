@@ -28,7 +28,7 @@ from pathlib import Path
 import zenoh
 
 from neuronsmae.protocol.errors import InvalidOptionError
-from neuronsmae.protocol.transport import check_locator
+from neuronsmae.protocol.transport import check_locator, zenoh_message
 
 CONFIG = Path(__file__).resolve().parent / "zenoh-router.json5"
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
@@ -68,11 +68,6 @@ def router_config(config: Path | None, listen: Sequence[str]) -> zenoh.Config:
     return conf
 
 
-def _message(exc: BaseException) -> str:
-    """Zenoh's message on one line, without the Rust source location it appends."""
-    return " ".join(str(exc).split()).split(" at /")[0]
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="run_router.py", description=__doc__.split("\n")[0])
     p.add_argument(
@@ -99,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         conf = router_config(args.config, args.listen)
     except zenoh.ZError as exc:  # the file is no Zenoh configuration, or a bad endpoint
-        p.error(f"--config {args.config}: not a usable Zenoh configuration: {_message(exc)}")
+        p.error(f"--config {args.config}: not a usable Zenoh configuration: {zenoh_message(exc)}")
     stopped: list[int] = []  # a plain list, not an Event: a handler must never take a lock
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, frame: stopped.append(signum))
@@ -116,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
-        sys.stderr.write(f"run_router.py: cannot start the router: {_message(exc)}\n")
+        sys.stderr.write(f"run_router.py: cannot start the router: {zenoh_message(exc)}\n")
         return 1
     try:
         listening = args.listen or "the configured endpoints"

@@ -30,7 +30,7 @@ import zenoh
 
 from neuronsmae.protocol.errors import ForkedZenohError, ServerUnavailableError
 from neuronsmae.protocol.messages import rpc_key
-from neuronsmae.protocol.transport import client_config, endpoint
+from neuronsmae.protocol.transport import client_config, endpoint, zenoh_message
 
 OPEN_TIMEOUT = 10.0
 """Seconds ``zenoh.open`` may take before the server counts as unreachable."""
@@ -110,7 +110,7 @@ class Pending:
                     f"no answer from {where} within {timeout:g} s ({detail})"
                 )
         except zenoh.ZError as exc:
-            raise ServerUnavailableError(f"query to {where} failed: {exc}") from exc
+            raise ServerUnavailableError(f"query to {where} failed: {zenoh_message(exc)}") from exc
         raise ServerUnavailableError(f"no NeuronsMAE server answers on {where}")
 
 
@@ -172,7 +172,9 @@ class Link:
         try:
             replies = self._querier(timeout).get(payload=payload)
         except zenoh.ZError as exc:
-            raise ServerUnavailableError(f"query to {self.where} failed: {exc}") from exc
+            raise ServerUnavailableError(
+                f"query to {self.where} failed: {zenoh_message(exc)}"
+            ) from exc
         return Pending(self, iter(replies), timeout)
 
     def call(self, payload: bytes, timeout: float) -> bytes:

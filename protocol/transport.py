@@ -49,6 +49,12 @@ def check_locator(value: object, name: str = "router") -> None:
         )
 
 
+def zenoh_message(exc: BaseException) -> str:
+    """A Zenoh error's message on one line, without the path into Zenoh's Rust sources it
+    appends (`` at /root/.cargo/...``), for messages a user reads."""
+    return " ".join(str(exc).split()).split(" at /")[0]
+
+
 def endpoint(host: str, port: int) -> str:
     """The Zenoh locator of ``host:port`` over TCP (IPv6 literals get brackets)."""
     if ":" in host and not host.startswith("["):

@@ -25,7 +25,7 @@ import zenoh
 
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
-from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_locator
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_locator, zenoh_message
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
 from neuronsmae.server.serving.rpc import (
@@ -197,7 +197,10 @@ def run(argv: Sequence[str] | None = None) -> int:
         return 2
     except Interrupted:
         return 0
-    except (OSError, zenoh.ZError, NeuronsMAEError) as exc:
+    except zenoh.ZError as exc:
+        log.error("cannot start: %s", zenoh_message(exc))
+        return 1
+    except (OSError, NeuronsMAEError) as exc:
         log.error("cannot start: %s", exc)
         return 1
 
