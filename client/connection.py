@@ -51,7 +51,7 @@ from neuronsmae.protocol.messages import (
     decode_reply,
     encode_request,
 )
-from neuronsmae.protocol.transport import check_locator
+from neuronsmae.protocol.transport import check_host, check_locator
 
 CLOSE_TIMEOUT = 1.0
 """Seconds ``close`` waits for the server to acknowledge, so closing never hangs."""
@@ -124,6 +124,7 @@ class Connection:
         if port is not None:
             ports_of(port)  # one port in 1..65535, or InvalidOptionError
         check_timeout(timeout)
+        check_host(host)
         if router is not None:
             check_locator(router)
         self.host, self.router, self.timeout = host, router, float(timeout)

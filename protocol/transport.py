@@ -49,6 +49,16 @@ def check_locator(value: object, name: str = "router") -> None:
         )
 
 
+def check_host(value: object, name: str = "host") -> None:
+    """Refuse a host that is not a non-empty name or address without spaces (an empty
+    one made the locator ``tcp/:port``, a non-string a TypeError)."""
+    if not isinstance(value, str) or not value.strip("[]") or any(c.isspace() for c in value):
+        raise InvalidOptionError(
+            f"{name} must be a host name or address such as 127.0.0.1 or server.lan, "
+            f"got {value!r}"
+        )
+
+
 def zenoh_message(exc: BaseException) -> str:
     """A Zenoh error's message on one line, without the path into Zenoh's Rust sources it
     appends (`` at /root/.cargo/...``), for messages a user reads."""

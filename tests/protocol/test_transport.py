@@ -6,7 +6,7 @@ import pytest
 import zenoh
 
 from neuronsmae.protocol.errors import InvalidOptionError
-from neuronsmae.protocol.transport import check_locator, client_config, zenoh_message
+from neuronsmae.protocol.transport import check_host, check_locator, client_config, zenoh_message
 
 
 def test_a_zenoh_error_reads_on_one_line_without_its_rust_source_path() -> None:
@@ -28,3 +28,17 @@ def test_a_locator_passes_and_configures_a_client(router: str) -> None:
 def test_anything_else_is_refused_naming_the_form(router: object) -> None:
     with pytest.raises(InvalidOptionError, match=r"router must be a Zenoh locator <protocol>/"):
         check_locator(router)
+
+
+@pytest.mark.parametrize("host", ["", "a b", None, 3, ["127.0.0.1"]])
+def test_a_client_refuses_a_host_that_is_no_name_or_address(host: object) -> None:
+    """'' made the locator tcp/:port; None or a number was a TypeError in the client."""
+    from neuronsmae.client import RM, VecRM
+
+    with pytest.raises(InvalidOptionError, match="host must be a host name or address"):
+        check_host(host)
+    for client in (RM, VecRM):
+        with pytest.raises(InvalidOptionError, match="host must be a host name or address"):
+            client(port=10000, host=host, launch=False, timeout=1)
+    for good in ("127.0.0.1", "server.lan", "::1", "[::1]"):
+        check_host(good)
