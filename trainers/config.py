@@ -73,6 +73,8 @@ released build's levels "0" and "1" (docs/contexts.md, "Bots")."""
 ENV_KINDS = ("inprocess", "remote")
 """``remote``: each worker owns a ``VecRM`` of its own vector server; ``inprocess``: each
 owns a ``VecArena``."""
+SERVED_ONLY = ("base_port", "servers_per_worker", "servers", "server_resources", "router")
+"""Cluster settings of the arenas' servers, meaningless with env=inprocess."""
 MAX_RUN_SEED = 2**32 - 1
 """Largest run seed: the range every generator a run seeds accepts as it is; worker ``i``'s
 arenas are seeded from ``seed × 1000`` on (trainers/train.py), far below an arena's limit."""
@@ -178,6 +180,7 @@ class TrainConfig:
                     f"cluster.{name} must be in [1, envs_per_worker={self.envs_per_worker}], "
                     f"got {getattr(self.cluster, name)}"
                 )
+        self._check_served_settings()
         check_finite(self)
         if not 0 <= self.seed <= MAX_RUN_SEED:
             raise ConfigError(f"seed must be in [0, {MAX_RUN_SEED}], got {self.seed}")
@@ -188,6 +191,24 @@ class TrainConfig:
         for name, kind in GROUPS.items():
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"{name} must be a {kind.__name__}")
+
+    def _check_served_settings(self) -> None:
+        """Refuse server settings where no server runs (env=inprocess would ignore them),
+        and a fleet's ports past 65535."""
+        cluster, default = self.cluster, ClusterConfig()
+        set_ = [name for name in SERVED_ONLY if getattr(cluster, name) != getattr(default, name)]
+        if self.env == "inprocess" and set_:
+            raise ConfigError(
+                f"cluster.{', cluster.'.join(set_)} {'applies' if len(set_) == 1 else 'apply'} "
+                "only to env=remote (the arenas' servers); env=inprocess plays the arenas "
+                "inside the workers"
+            )
+        last = cluster.base_port + self.n_workers() - 1
+        if cluster.base_port and last > 65535:
+            raise ConfigError(
+                f"cluster.base_port={cluster.base_port} with {self.n_workers()} workers needs "
+                f"ports up to {last}; the last port is 65535"
+            )
 
     @property
     def run_dir(self) -> Path:

@@ -121,6 +121,12 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["gamma=nan"], "gamma must be a finite number, got nan"),
         (["worker_resources=big=nan"], "expected a custom name and an amount > 0"),
         (["eps_anneal_episodes=-1"], "eps_anneal_episodes must be ≥ 0, got -1"),
+        (["env=inprocess", "base_port=12000"], "cluster.base_port applies only to env=remote"),
+        (
+            ["env=inprocess", "servers=actors", "router=tcp/h:7447"],
+            "cluster.servers, cluster.router apply only to env=remote",
+        ),
+        (["base_port=65535", "workers=3"], "base_port=65535 with 3 workers needs ports up to"),
         (
             ["arena.options=k=6;coef=2"],
             r"arena.options sets unknown option\(s\) \['coef'\]; valid:",
