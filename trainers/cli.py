@@ -30,6 +30,7 @@ from neuronsmae.trainers.config import (
     PRESETS,
     ConfigError,
     TrainConfig,
+    check_resumable,
     field_docs,
     make_config,
     parse_overrides,
@@ -113,6 +114,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
             raise ConfigError(f"--resume: no {saved}; pass the run's --out")
         base = make_config(json.loads(saved.read_text()))
     cfg = make_config(*layers, base=base)
+    if base is not None:
+        check_resumable(base, cfg)
     if cfg.run_dir.exists() and not cfg.run_dir.is_dir():
         raise ConfigError(f"out {str(cfg.run_dir)!r} exists and is not a directory")
     if not args.resume:

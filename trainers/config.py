@@ -73,6 +73,14 @@ released build's levels "0" and "1" (docs/contexts.md, "Bots")."""
 ENV_KINDS = ("inprocess", "remote")
 """``remote``: each worker owns a ``VecRM`` of its own vector server; ``inprocess``: each
 owns a ``VecArena``."""
+FIXED_ON_RESUME = (
+    "alg", "learner.agent_hidden", "learner.mixer_embed", "learner.hypernet_hidden",
+    "learner.features", "learner.head", "learner.last_action_input", "learner.agent_id_input",
+    "arena.action_space", "arena.n_blue", "arena.n_red", "arena.observability", "arena.lidar",
+    "arena.vector_obs", "arena.options",
+)  # fmt: skip
+"""Settings a resumed run keeps: they shape the networks in its checkpoint (the task's
+settings set their input and output sizes; its reward and spawn may change)."""
 SERVED_ONLY = ("base_port", "servers_per_worker", "servers", "server_resources", "router")
 """Cluster settings of the arenas' servers, meaningless with env=inprocess."""
 MAX_RUN_SEED = 2**32 - 1
@@ -449,3 +457,24 @@ def make_config(*layers: Mapping[str, Any], base: TrainConfig | None = None) -> 
             (values[group] if group else values)[name] = _coerce(key, value)
     groups = {name: cls(**values.pop(name)) for name, cls in GROUPS.items()}
     return TrainConfig(**values, **groups)
+
+
+def check_resumable(saved: TrainConfig, cfg: TrainConfig) -> None:
+    """Refuse a resumed run's config that changes a :data:`FIXED_ON_RESUME` setting of the
+    saved one, naming each (its checkpoint's networks would not fit)."""
+    before, after = saved.to_dict(), cfg.to_dict()
+
+    def value(config: dict[str, Any], key: str) -> Any:
+        group, _, name = key.rpartition(".")
+        return config[group][name] if group else config[key]
+
+    changed = [
+        f"{key} {value(before, key)!r} -> {value(after, key)!r}"
+        for key in FIXED_ON_RESUME
+        if value(before, key) != value(after, key)
+    ]
+    if changed:
+        raise ConfigError(
+            f"--resume keeps the settings that shape the run's networks; this changes "
+            f"{'; '.join(changed)}. Start a new run (another --out) to train with them"
+        )

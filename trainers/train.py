@@ -43,6 +43,7 @@ from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer, ReplayMemoryError
 from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
+    CheckpointError,
     Counters,
     load_checkpoint,
     policy_weights,
@@ -207,7 +208,15 @@ class Trainer:
 
     def _resume(self) -> None:
         payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
-        self.learner.load_state_dict(payload["learner"])
+        try:
+            self.learner.load_state_dict(payload["learner"])
+        except (RuntimeError, KeyError, ValueError) as err:  # torch's mismatch report
+            first = str(err).strip().splitlines()[0]
+            raise CheckpointError(
+                f"{self.run_dir / CHECKPOINT_NAME}: its networks do not fit this config "
+                f"({first}); a resumed run keeps the settings in "
+                "trainers.config.FIXED_ON_RESUME"
+            ) from err
         self.counters = Counters(**payload["counters"])
         restore_rng(payload["rng"], self.np_rng)
         if payload.get("starts") is not None:

@@ -429,3 +429,25 @@ def test_more_torch_threads_than_cores_is_refused_before_ray_starts(tmp_path: Pa
     with pytest.raises(ConfigError, match=f"torch_threads={cores + 1}: .* give 1 to {cores}"):
         Trainer(cfg)
     assert not (tmp_path / "run").exists()
+
+
+def test_resume_refuses_settings_that_change_the_networks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--resume --alg qmix on a VDN run was torch's 'Missing key(s) in state_dict' traceback,
+    after Ray and the workers had started."""
+    from neuronsmae.trainers.config import FIXED_ON_RESUME, check_resumable
+
+    saved = make_config({"alg": "vdn", "out": str(tmp_path)})
+    (tmp_path / "config.json").write_text(json.dumps(saved.to_dict()))
+    argv = ["--resume", "--out", str(tmp_path), "--episodes", "1"]
+    for extra, said in (
+        (["--alg", "qmix"], "this changes alg 'vdn' -> 'qmix'"),
+        (["--set", "agent_hidden=64"], "learner.agent_hidden 128 -> 64"),
+        (["--set", "n_blue=3", "--set", "n_red=3"], "arena.n_blue 2 -> 3; arena.n_red 2 -> 3"),
+    ):
+        assert main([*argv, *extra]) == 2
+        assert said in capsys.readouterr().err
+    # What does not shape the networks may change: the opponent, the budget, the reward.
+    check_resumable(saved, make_config(saved.to_dict(), {"level": "hard", "reward": "sparse"}))
+    assert all(key in KEYS for key in FIXED_ON_RESUME)

@@ -18,6 +18,7 @@ import ray
 import torch
 
 from neuronsmae.trainers.buffer import Batch, Episode
+from neuronsmae.trainers.checkpoint import CheckpointError
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import ConfigError, make_config, preset
 from neuronsmae.trainers.contexts import ContextSpec
@@ -66,6 +67,10 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     assert second["counters"]["episodes"] == 12
     assert second["counters"]["updates"] > first["counters"]["updates"]
     assert second["counters"]["env_steps"] > first["counters"]["env_steps"]
+    # From Python no CLI check runs first: the checkpoint's networks must fit, by name.
+    other = make_config(second["config"], {"alg": "vdn", "episodes": 16, "progress": False})
+    with pytest.raises(CheckpointError, match="its networks do not fit this config"):
+        Trainer(other, resume=True)
 
     # The match command plays the checkpoint through the registered policy entry point.
     from neuronsmae.trainers.match import play
