@@ -35,6 +35,13 @@ class CheckpointError(NeuronsMAEError, ValueError):
     code = "invalid_checkpoint"
 
 
+class MissingCheckpointError(CheckpointError, FileNotFoundError):
+    """No checkpoint where one was expected (a run stopped before its first one, or a
+    mistyped path)."""
+
+    code = "missing_checkpoint"
+
+
 @dataclass
 class Counters:
     """Progress of a run, carried across ``--resume``."""
@@ -108,7 +115,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a checkpoint (file or run directory) with ``weights_only=True``."""
     p = checkpoint_path(path)
     if not p.is_file():
-        raise FileNotFoundError(f"no checkpoint at {p}")
+        raise MissingCheckpointError(f"no checkpoint at {p}")
     try:
         payload = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch reports a bad file as any of several error types

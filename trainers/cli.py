@@ -112,6 +112,11 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         saved = probe.run_dir / "config.json"
         if not saved.is_file():
             raise ConfigError(f"--resume: no {saved}; pass the run's --out")
+        if not (probe.run_dir / "checkpoint.pt").is_file():
+            raise ConfigError(
+                f"--resume: {probe.run_dir} holds no checkpoint.pt (the run stopped before its "
+                "first one); start it afresh instead: remove the directory, or another --out"
+            )
         base = make_config(json.loads(saved.read_text()))
     cfg = make_config(*layers, base=base)
     if base is not None:

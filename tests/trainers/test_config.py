@@ -451,3 +451,20 @@ def test_resume_refuses_settings_that_change_the_networks(
     # What does not shape the networks may change: the opponent, the budget, the reward.
     check_resumable(saved, make_config(saved.to_dict(), {"level": "hard", "reward": "sparse"}))
     assert all(key in KEYS for key in FIXED_ON_RESUME)
+
+
+def test_resume_without_a_checkpoint_says_so_before_training(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run stopped before its first checkpoint: --resume was a FileNotFoundError traceback
+    after Ray had started."""
+    from neuronsmae.trainers.checkpoint import MissingCheckpointError, load_checkpoint
+
+    (tmp_path / "config.json").write_text(json.dumps(make_config({}).to_dict()))
+    assert main(["--resume", "--out", str(tmp_path), "--episodes", "1"]) == 2
+    assert "holds no checkpoint.pt (the run stopped before its first one)" in (
+        capsys.readouterr().err
+    )
+    with pytest.raises(MissingCheckpointError, match="no checkpoint at") as caught:
+        load_checkpoint(tmp_path)
+    assert isinstance(caught.value, FileNotFoundError)  # what callers caught before
