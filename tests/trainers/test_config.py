@@ -296,6 +296,7 @@ def test_resume_reads_the_saved_config(tmp_path: Path) -> None:
         config_from_args(args)
     saved = make_config({"out": str(tmp_path), "agent_hidden": 16, "alg": "iql"})
     (tmp_path / "config.json").write_text(json.dumps(saved.to_dict()))
+    (tmp_path / "checkpoint.pt").write_bytes(b"")  # read only once the run starts
     args = build_parser().parse_args(["--resume", "--out", str(tmp_path), "--episodes", "9"])
     resumed = config_from_args(args)
     assert resumed.learner.agent_hidden == 16 and resumed.alg == "iql"
@@ -440,6 +441,7 @@ def test_resume_refuses_settings_that_change_the_networks(
 
     saved = make_config({"alg": "vdn", "out": str(tmp_path)})
     (tmp_path / "config.json").write_text(json.dumps(saved.to_dict()))
+    (tmp_path / "checkpoint.pt").write_bytes(b"")  # read only once the run starts
     argv = ["--resume", "--out", str(tmp_path), "--episodes", "1"]
     for extra, said in (
         (["--alg", "qmix"], "this changes alg 'vdn' -> 'qmix'"),
