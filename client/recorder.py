@@ -23,11 +23,12 @@ from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
 from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.protocol.recording import (
-    SUFFIX,
     Decision,
     Recording,
     RecordingWriter,
     decision_hash,
+    existing_recordings,
+    recording_name,
     to_plain,
 )
 from neuronsmae.protocol.wrappers import ArenaWrapper
@@ -77,6 +78,8 @@ class Recorder(ArenaWrapper):
     caps how many; the others are played but not written. Files are named
     ``{prefix}{n:05d}_s{seed}.jsonl.gz`` (``n`` counts recorded episodes) and listed in
     :attr:`paths`; give each of several recorders sharing a directory its own ``prefix``.
+    A directory that already holds files of the same series is refused (they would be
+    overwritten), and no recording file is ever overwritten.
 
     One difference from the bare arena: ``reset(seed=None)`` resets with a seed drawn from
     the recorder's own generator (seeded by the arena's seed), because an episode that
@@ -107,6 +110,13 @@ class Recorder(ArenaWrapper):
                 "directory (created on the first recorded episode if missing)"
             )
         _check_settings(arena_seed, limit, prefix)
+        found = existing_recordings(self.out_dir, prefix)
+        if found:
+            raise InvalidOptionError(
+                f"out_dir {str(out_dir)!r} already holds {len(found)} recording(s) named "
+                f"{prefix!r}... ({found[0].name}, ...): they would be overwritten; give another "
+                "out_dir or prefix"
+            )
         self.seed = int(arena_seed)
         self.options = to_plain(dict(options))
         self.meta = to_plain(dict(meta or {}))
@@ -149,7 +159,7 @@ class Recorder(ArenaWrapper):
                 reset_hash=decision_hash(self.env.get_state()),
                 meta=self.meta,
             )
-            path = self.out_dir / f"{self.prefix}{len(self.paths):05d}_s{seed}{SUFFIX}"
+            path = self.out_dir / recording_name(self.prefix, len(self.paths), seed)
             self._writer = RecordingWriter(path, rec)
             self.paths.append(path)
         return obs

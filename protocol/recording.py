@@ -36,6 +36,7 @@ from __future__ import annotations
 import gzip
 import hashlib
 import json
+import re
 import zlib
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +45,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import RecordingFormatError
+from neuronsmae.protocol.errors import InvalidOptionError, RecordingFormatError
 
 FORMAT = "neuronsmae-episode"
 VERSION = 1
@@ -178,17 +179,40 @@ def _decision_line(k: int, d: Decision) -> dict[str, Any]:
     return row
 
 
+def recording_name(prefix: str, n: int, seed: int) -> str:
+    """The file name of the ``n``-th recording of a series, of an episode reset with
+    ``seed``: ``{prefix}{n:05d}_s{seed}.jsonl.gz``."""
+    return f"{prefix}{n:05d}_s{seed}{SUFFIX}"
+
+
+def existing_recordings(folder: str | Path, prefix: str) -> list[Path]:
+    """The files in ``folder`` named as :func:`recording_name` names a series with
+    ``prefix``, sorted; empty when the folder does not exist."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    name = re.compile(re.escape(prefix) + r"\d{5,}_s\d+" + re.escape(SUFFIX))
+    return sorted(p for p in folder.iterdir() if name.fullmatch(p.name))
+
+
 class RecordingWriter:
     """Writes one recording line by line as the episode is played.
 
     Each line is flushed through gzip as it is written (a sync flush), so a run that dies
-    mid-episode leaves a readable file of the decisions played so far.
+    mid-episode leaves a readable file of the decisions played so far. A file that exists
+    is never overwritten (``InvalidOptionError``): recordings are data.
     """
 
     def __init__(self, path: str | Path, recording: Recording) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._raw: IO[bytes] = self.path.open("wb")
+        try:
+            self._raw: IO[bytes] = self.path.open("xb")
+        except FileExistsError as exc:
+            raise InvalidOptionError(
+                f"{self.path} exists: a recording is never overwritten; record into another "
+                "folder (or with another prefix)"
+            ) from exc
         self._gz = gzip.GzipFile(fileobj=self._raw, mode="wb", mtime=0)
         self._k = 0
         self._write(recording.header())

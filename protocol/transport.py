@@ -54,8 +54,7 @@ def check_host(value: object, name: str = "host") -> None:
     one made the locator ``tcp/:port``, a non-string a TypeError)."""
     if not isinstance(value, str) or not value.strip("[]") or any(c.isspace() for c in value):
         raise InvalidOptionError(
-            f"{name} must be a host name or address such as 127.0.0.1 or server.lan, "
-            f"got {value!r}"
+            f"{name} must be a host name or address such as 127.0.0.1 or server.lan, got {value!r}"
         )
 
 

@@ -41,10 +41,11 @@ from neuronsmae.protocol.interface import VecArenaAPI
 from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.protocol.policies import TeamPolicy, layout_differences, load_team_policy
 from neuronsmae.protocol.recording import (
-    SUFFIX,
     Decision,
     Recording,
     decision_hash,
+    existing_recordings,
+    recording_name,
     write_recording,
 )
 
@@ -200,6 +201,12 @@ def play(
     setup = arrange(Side.of(blue, "--blue"), Side.of(red, "--red"), options)
     if record is not None and record.exists() and not record.is_dir():
         raise InvalidOptionError(f"record: {record} exists and is not a directory")
+    found = existing_recordings(record, "episode_") if record is not None else []
+    if found:
+        raise InvalidOptionError(
+            f"record: {record} already holds {len(found)} recording(s) ({found[0].name}, ...), "
+            "which this match's would overwrite; record into an empty or new folder"
+        )
     k = min(arenas, episodes)
     env = open_arenas(seed, k, setup.options, port, servers)
     try:
@@ -260,7 +267,7 @@ def _play(
                 if rec is not None:
                     first = rec if rec.meta["episode"] == 0 and draw else first
                     if record is not None:
-                        name = f"episode_{rec.meta['episode']:05d}_s{rec.seed}{SUFFIX}"
+                        name = recording_name("episode_", rec.meta["episode"], rec.seed)
                         write_recording(record / name, rec)
                 following[j] = plan.next()
                 if following[j] is None:

@@ -12,7 +12,7 @@ from neuronsmae.client import RM
 from neuronsmae.client.recorder import Recorder
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI
-from neuronsmae.protocol.recording import read_recording
+from neuronsmae.protocol.recording import existing_recordings, read_recording, write_recording
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.tools.replay import replay
 from tests.client.conftest import free_port, same
@@ -63,6 +63,26 @@ def test_select_and_limit_pick_the_episodes_written(tmp_path: Path) -> None:
     rec = read_recording(env.paths[1])
     assert len(rec.decisions) == 2 and not rec.complete
     assert replay(rec).decisions == 2
+
+
+def test_recordings_already_there_are_never_overwritten(tmp_path: Path) -> None:
+    """A second recorder (or match) in the same folder wrote its episode_00000_s0 over the
+    first one's."""
+    first = Recorder(Arena(seed=1), tmp_path)
+    first.reset(seed=0)
+    play(first, np.random.default_rng(0), limit=3)
+    first.close()
+    kept = first.paths[0].read_bytes()
+    with pytest.raises(InvalidOptionError, match=r"already holds 1 recording.* overwritten"):
+        Recorder(Arena(seed=1), tmp_path)
+    other = Recorder(Arena(seed=1), tmp_path, prefix="episode_b_")  # another series: fine
+    other.reset(seed=0)
+    other.close()
+    assert [p.name for p in other.paths] == ["episode_b_00000_s0.jsonl.gz"]
+    with pytest.raises(InvalidOptionError, match="exists: a recording is never overwritten"):
+        write_recording(first.paths[0], read_recording(first.paths[0]))
+    assert first.paths[0].read_bytes() == kept
+    assert existing_recordings(tmp_path, "episode_") == first.paths  # not episode_b_'s
 
 
 def test_recorder_keeps_the_interface_and_passes_the_rest_through(tmp_path: Path) -> None:

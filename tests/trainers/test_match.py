@@ -72,6 +72,17 @@ def test_a_record_dir_that_is_a_file_is_refused_before_playing(
         M.play("easy", "easy", 2, 0, record=taken)
 
 
+def test_a_record_dir_holding_recordings_is_refused_before_playing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second match into the same folder overwrote the first one's episode files."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    (tmp_path / "episode_00000_s0.jsonl.gz").write_bytes(b"an earlier match's")
+    (tmp_path / "notes.txt").write_text("other files do not count")
+    with pytest.raises(InvalidOptionError, match="already holds 1 recording"):
+        M.play("easy", "easy", 2, 0, record=tmp_path)
+
+
 def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
     with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
         M.play("easy", "nowhere.pt", 1, 0)
