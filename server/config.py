@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.levels import level_error, level_value
@@ -98,6 +101,9 @@ class ArenaConfig:
         if level is None:
             raise InvalidOptionError(level_error("option blue_level", self.blue_level))
         object.__setattr__(self, "blue_level", level)  # 1.0 → 1, as for the level context
+        for name in ("vector_obs", "lidar", "zones", "gui", "clip_actions"):
+            _check_bool(self, name)
+        _check_bool(self, "candidate_obs", optional=True)
         _check_int(self, "n_blue", 1, 3)
         _check_int(self, "n_red", 1, 3)
         _check_int(self, "episode_steps", 1, 100_000)
@@ -148,14 +154,34 @@ class ArenaConfig:
         return dataclasses.asdict(self)
 
 
+def _is_bool(value: Any) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
 def _check_int(cfg: ArenaConfig, name: str, lo: int, hi: int) -> None:
+    """An integer option (NumPy's too, stored as a Python int) in [lo, hi]."""
     value = getattr(cfg, name)
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+    if _is_bool(value) or not isinstance(value, numbers.Integral) or not lo <= value <= hi:
         raise InvalidOptionError(f"option {name}={value!r} must be an integer in [{lo}, {hi}]")
+    object.__setattr__(cfg, name, int(value))
 
 
 def _check_float(cfg: ArenaConfig, name: str, lo: float, hi: float) -> None:
+    """A number option (NumPy's too, stored as a Python float) in [lo, hi]."""
     value = getattr(cfg, name)
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    ok = isinstance(value, numbers.Real) and not _is_bool(value)
     if not ok or not math.isfinite(value) or not lo <= value <= hi:
         raise InvalidOptionError(f"option {name}={value!r} must be a number in [{lo}, {hi}]")
+    object.__setattr__(cfg, name, float(value))
+
+
+def _check_bool(cfg: ArenaConfig, name: str, optional: bool = False) -> None:
+    """A switch: True or False (NumPy's too; None too when ``optional``). A string such as
+    "false" would otherwise count as on."""
+    value = getattr(cfg, name)
+    if optional and value is None:
+        return
+    if not _is_bool(value):
+        valid = "True, False or None" if optional else "True or False"
+        raise InvalidOptionError(f"option {name}={value!r} must be {valid}")
+    object.__setattr__(cfg, name, bool(value))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ import pytest
 
 from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, ResetNeededError
 from neuronsmae.server import Arena
+from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.sim import field as F
 from tests.server.conftest import still
 
@@ -214,6 +216,30 @@ def test_bad_options_list_valid_ones() -> None:
         Arena(seed=1, warp_speed=True)
     with pytest.raises(InvalidOptionError, match="abstract"):
         Arena(seed=1, action_space="teleport")
+
+
+@pytest.mark.parametrize(
+    ("option", "said"),
+    [
+        ({"lidar": "false"}, "option lidar='false' must be True or False"),  # was: LiDAR on
+        ({"zones": 1}, "option zones=1 must be True or False"),
+        ({"candidate_obs": "no"}, "option candidate_obs='no' must be True, False or None"),
+        ({"n_blue": 2.0}, "option n_blue=2.0 must be an integer in [1, 3]"),
+    ],
+)
+def test_an_option_of_the_wrong_type_is_refused(option: dict[str, object], said: str) -> None:
+    with pytest.raises(InvalidOptionError, match=re.escape(said)):
+        ArenaConfig.from_options(option)
+
+
+def test_numpy_numbers_and_switches_are_options_like_python_ones() -> None:
+    """n_blue=np.int32(2) was refused ("must be an integer") while seed=np.int64 was taken."""
+    cfg = ArenaConfig.from_options(
+        {"n_blue": np.int32(3), "n_red": np.int64(3), "lidar_range": np.float32(5.0),
+         "lidar": np.bool_(True), "candidate_obs": None}
+    )  # fmt: skip
+    assert (cfg.n_blue, cfg.n_red, cfg.lidar_range, cfg.lidar) == (3, 3, 5.0, True)
+    assert all(type(v) in (int, float, bool, str, type(None)) for v in cfg.to_dict().values())
 
 
 @pytest.mark.parametrize("seed", [-1, 2**63, 1.5, True, "7"])
