@@ -167,6 +167,11 @@ class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
         acting = self.agents
         if not acting and self._playing:  # the episode has ended: nothing acts any more
             return {}, {}, {}, {}, {}
+        if not isinstance(actions, Mapping):
+            raise InvalidActionError(
+                f"actions must be a dict of agent name to action (agents {acting}), got "
+                f"{actions!r:.80}"
+            )
         missing = [a for a in acting if a not in actions]
         if missing:
             raise InvalidActionError(f"no action for live agent(s) {missing}")

@@ -280,6 +280,18 @@ def test_a_step_after_the_end_is_empty_and_one_before_the_start_is_refused(
     assert env.reset(seed=2)[0].keys() == set(env.possible_agents)
 
 
+@pytest.mark.parametrize("actions", [None, [0, 0], 3])
+def test_actions_that_are_no_dict_are_refused_by_name(actions: Any) -> None:
+    """None was a TypeError ("argument of type 'NoneType' is not iterable")."""
+    env = parallel_env(env=IN_PROCESS, seed=3, **SHORT)
+    try:
+        env.reset()
+        with pytest.raises(InvalidActionError, match="actions must be a dict of agent name"):
+            env.step(actions)
+    finally:
+        env.close()
+
+
 def test_pickles_as_its_recipe() -> None:
     env = parallel_env(env=IN_PROCESS, seed=3, masks="info", **SHORT)
     copy = pickle.loads(pickle.dumps(env))
