@@ -236,15 +236,25 @@ def per_agent_actions(actions: Any, n_agents: int, discrete: bool = True) -> lis
         raise InvalidActionError(f"expected {n_agents} actions (one per agent), got {count}")
     if not discrete:
         return list(actions)
-    out = []
-    for i, a in enumerate(actions):
-        try:
-            out.append(int(a))
-        except (TypeError, ValueError, OverflowError) as exc:
+    return [_discrete_action(i, a) for i, a in enumerate(actions)]
+
+
+def _discrete_action(agent: int, action: Any) -> int:
+    """``int()`` of one discrete action, refusing what it would change: a fraction (0.5 was
+    taken as 0) or a bool, as the arena does."""
+    try:
+        value = action.item() if hasattr(action, "item") else action  # NumPy, torch scalars
+        if (isinstance(value, float) and not value.is_integer()) or isinstance(value, bool):
             raise InvalidActionError(
-                f"agent {i}: an action is an integer (anything int() accepts), got {a!r:.80}"
-            ) from exc
-    return out
+                f"agent {agent}: an action is an integer (a whole number), got {action!r:.80}"
+            )
+        return int(value)
+    except InvalidActionError:
+        raise
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InvalidActionError(
+            f"agent {agent}: an action is an integer (anything int() accepts), got {action!r:.80}"
+        ) from exc
 
 
 RESET_OPTIONS = ("contexts",)

@@ -286,3 +286,15 @@ def test_forked_workers_each_launch_their_own_server() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False
     )
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-3000:]
+
+
+def test_a_fractional_or_boolean_action_is_refused_not_truncated() -> None:
+    """The per-agent and SMAC faces took int() of each action: 0.5 became action 0."""
+    from neuronsmae.client.spaces import per_agent_actions
+    from neuronsmae.protocol.errors import InvalidActionError
+
+    for bad in ([0.5, 0], [True, 1], [float("nan"), 0], [np.array([1, 2]), 0], [None, 0]):
+        with pytest.raises(InvalidActionError, match="agent 0: an action is an integer"):
+            per_agent_actions(bad, 2)
+    whole = [np.float32(2.0), np.array(3)]
+    assert per_agent_actions(whole, 2) == [2, 3]  # whole numbers in any numeric form
