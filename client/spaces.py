@@ -244,17 +244,16 @@ def _discrete_action(agent: int, action: Any) -> int:
     taken as 0) or a bool, as the arena does."""
     try:
         value = action.item() if hasattr(action, "item") else action  # NumPy, torch scalars
-        if (isinstance(value, float) and not value.is_integer()) or isinstance(value, bool):
-            raise InvalidActionError(
-                f"agent {agent}: an action is an integer (a whole number), got {action!r:.80}"
-            )
-        return int(value)
-    except InvalidActionError:
-        raise
+        whole = int(value)
     except (TypeError, ValueError, OverflowError) as exc:
         raise InvalidActionError(
             f"agent {agent}: an action is an integer (anything int() accepts), got {action!r:.80}"
         ) from exc
+    if isinstance(value, bool) or (isinstance(value, float) and value != whole):
+        raise InvalidActionError(
+            f"agent {agent}: an action is an integer (a whole number), got {action!r:.80}"
+        )
+    return whole
 
 
 RESET_OPTIONS = ("contexts",)
