@@ -106,14 +106,13 @@ def check_listen_host(host: object, name: str = "host") -> None:
 
 
 def check_port(host: str, port: int) -> None:
-    """Raise PortInUseError if something already listens on ``host:port`` (and
-    InvalidOptionError if ``host`` is no address to listen on, see :func:`check_listen_host`).
+    """Raise PortInUseError if something already listens on ``host:port`` (``host`` already
+    checked by :func:`check_listen_host`).
 
     Zenoh's own bind failure is caught too (see :class:`RpcServer`); checking first gives a
     clear message before the slow arena build rather than after it. SO_REUSEADDR makes the
     probe ignore connections lingering in TIME_WAIT, so only a live listener counts.
     """
-    check_listen_host(host)
     try:
         _bind_probe(host, port)
     except OSError as exc:

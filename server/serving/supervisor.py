@@ -27,7 +27,7 @@ from neuronsmae.protocol.launch import ServerCommand, check_launch
 from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
 from neuronsmae.protocol.transport import check_locator
 from neuronsmae.server.serving.probe import Health, Probe
-from neuronsmae.server.serving.rpc import PortInUseError, check_port
+from neuronsmae.server.serving.rpc import PortInUseError, check_listen_host, check_port
 
 log = logging.getLogger("neuronsmae.serve")
 
@@ -158,14 +158,16 @@ class Fleet:
         Raises :class:`FleetStartError` when a port is taken or a server exits while
         starting; a server that is merely slow is left to :meth:`check`.
         """
+        try:
+            check_listen_host(self.spec.host)
+        except InvalidOptionError as exc:
+            raise FleetStartError(str(exc)) from exc
         for member in self.members:  # else another server's pings would pass for ours
             try:
                 check_port(self.spec.host, member.port)
             except PortInUseError as exc:
                 msg = f"{exc}; stop what uses it or pick another --base-port"
                 raise FleetStartError(msg) from exc
-            except InvalidOptionError as exc:
-                raise FleetStartError(str(exc)) from exc
         first, rest = self.members[:1], self.members[1:]
         for group in (first, rest):
             if stop is not None and stop.set:
