@@ -60,6 +60,7 @@ from neuronsmae.trainers.config import (
 )
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import evaluate_checkpoint
+from neuronsmae.trainers.interrupt import TrainingInterrupted
 from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
 
@@ -377,7 +378,13 @@ def main(argv: list[str] | None = None) -> int:
                 done = {(r["alg"], r["level"], r["seed"], r["learner"]) for r in table["records"]}
                 if key in done:
                     continue
-                line = run_cell(args, alg, level, seed)
+                try:
+                    line = run_cell(args, alg, level, seed)
+                except TrainingInterrupted as exc:  # checkpoint saved: the same command resumes
+                    print(f"paper_table: {exc.signal_name}: {alg}/{level}/s{seed} stopped at "
+                          f"{exc.episodes} episodes with its checkpoint; run the same command "
+                          "to resume it", file=sys.stderr)  # fmt: skip
+                    return 130
                 table = load(args.out)  # another process may have added records meanwhile
                 table["records"].append(line)
                 save(args.out, table)

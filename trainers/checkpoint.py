@@ -81,13 +81,15 @@ def save_checkpoint(
     selection: dict[str, Any] | None = None,
     starts: dict[str, Any] | None = None,
     opponents: dict[str, Any] | None = None,
+    finished: bool = False,
 ) -> None:
     """Write the checkpoint atomically (temporary file, then rename).
 
     ``learner_state`` is ``QLearner.state_dict()``: its ``agent`` entry is what acting needs.
     ``selection`` is the evaluation that chose these weights (for ``best.pt``).
     ``starts`` is the start replay's state (``StartReplay.state_dict()``) and ``opponents``
-    the opponent pool's (its snapshots), for ``--resume``.
+    the opponent pool's (its snapshots), for ``--resume``. ``finished``: written after the
+    run's final evaluation (a resumed run that was not finished evaluates again).
     """
     payload = {
         "format": FORMAT,
@@ -99,6 +101,7 @@ def save_checkpoint(
         "selection": selection,
         "starts": starts,
         "opponents": opponents,
+        "finished": finished,
         "rng": {
             "torch": torch.get_rng_state(),
             "numpy": np_rng.bit_generator.state,

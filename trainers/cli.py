@@ -154,6 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
     from neuronsmae.trainers.checkpoint import CheckpointError
+    from neuronsmae.trainers.interrupt import TrainingInterrupted
     from neuronsmae.trainers.sampler import PlacementError
     from neuronsmae.trainers.train import train  # heavy imports (Ray, torch) after parsing
 
@@ -162,6 +163,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, CheckpointError, PlacementError) as err:  # what only the run finds
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2
+    except TrainingInterrupted as stop:
+        print(f"neuronsmae-train: {stop}", file=sys.stderr)
+        return 130
     final, counters = result["final"], result["counters"]
     print(
         f"{cfg.alg}{f' (trained against {cfg.opponent})' if cfg.opponent else ''} vs "

@@ -131,6 +131,52 @@ def check_new_run_dir(run_dir: Path) -> None:
         )
 
 
+COUNT_COLUMNS = {"train.csv": "episodes", "eval.csv": "episodes", "episodes.csv": "episode"}
+"""Each CSV record's column of the episode count a row was written at."""
+
+
+def trim_records(run_dir: Path, episodes: int, *, redo_final: bool = False) -> int:
+    """Make a run's CSV records end where its checkpoint does, before a resumed run appends.
+
+    Rows written after the checkpoint at ``episodes`` (a run stopped between two
+    checkpoints) describe episodes the resumed run plays again from the same seeds: kept,
+    they would be recorded twice and a learning curve would step back. With ``redo_final``
+    (the checkpoint ends training and the resumed run evaluates it again) the test rows at
+    ``episodes`` go too. A row cut short by a kill is dropped with them. Each changed file
+    is rewritten whole and swapped in atomically. Returns the number of rows dropped.
+    """
+    dropped = 0
+    for name, column in COUNT_COLUMNS.items():
+        path = run_dir / name
+        if not path.is_file():
+            continue
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            columns, rows = reader.fieldnames, list(reader)
+        kept = [r for r in rows if _before(r, column, episodes, redo_final)]
+        if len(kept) == len(rows) or columns is None:
+            continue
+        dropped += len(rows) - len(kept)
+        tmp = path.with_suffix(".tmp")
+        with tmp.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns)
+            writer.writeheader()
+            writer.writerows(kept)
+        tmp.replace(path)
+    return dropped
+
+
+def _before(row: dict[str, Any], column: str, episodes: int, redo_final: bool) -> bool:
+    """Whether ``row`` was written at or before the checkpoint at ``episodes``."""
+    try:
+        at = int(row[column])
+    except (KeyError, TypeError, ValueError):
+        return False  # a row cut short
+    if None in row or any(v is None for v in row.values()):
+        return False  # too many or too few fields: cut short
+    return at < episodes or (at == episodes and not (redo_final and row.get("split") == "test"))
+
+
 class _Csv:
     """Append rows to a CSV file, writing the header only when the file is new."""
 
@@ -159,14 +205,19 @@ class Recorder:
         done_episodes: int,
         progress: bool,
         max_seconds: float = 0.0,
+        purge_after: int | None = None,
     ) -> None:
+        """``purge_after``: a resumed run's env steps at its checkpoint; TensorBoard hides
+        the scalars logged past it before the run stopped (the CSV files are trimmed by
+        :func:`trim_records`)."""
         run_dir.mkdir(parents=True, exist_ok=True)
         self.train_csv = _Csv(run_dir / "train.csv", TRAIN_COLUMNS)
         self.eval_csv = _Csv(run_dir / "eval.csv", EVAL_COLUMNS)
         self.episodes_csv = _Csv(run_dir / "episodes.csv", EPISODE_COLUMNS)
         from torch.utils.tensorboard import SummaryWriter  # 1-2 s to import: only for a run
 
-        self.tb = SummaryWriter(str(run_dir / "tb"))
+        purge = None if purge_after is None else purge_after + 1
+        self.tb = SummaryWriter(str(run_dir / "tb"), purge_step=purge)
         self.total, self.first, self.episodes = total_episodes, done_episodes, done_episodes
         self.max_seconds = max_seconds
         self.bar = tqdm(
@@ -252,5 +303,3 @@ class Recorder:
         self.tb.close()
         for table in (self.train_csv, self.eval_csv, self.episodes_csv):
             table.close()
-        self.train_csv.close()
-        self.eval_csv.close()

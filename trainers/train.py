@@ -56,10 +56,11 @@ from neuronsmae.trainers.config_groups import TEST_SEED_OFFSET
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
+from neuronsmae.trainers.interrupt import POLL_SECONDS, StopSignals, TrainingInterrupted
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement, start_ray
-from neuronsmae.trainers.records import Recorder, check_new_run_dir
+from neuronsmae.trainers.records import Recorder, check_new_run_dir, trim_records
 from neuronsmae.trainers.rollout import Policy, Request
 from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
@@ -118,6 +119,11 @@ class Trainer:
         extra test sets."""
         self.best: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
         """Acting weights of the best validation evaluation, and that evaluation's row."""
+        self.stop = StopSignals()
+        """Turns Ctrl-C or SIGTERM into a stop request while :meth:`run` runs."""
+        self.resumed_steps: int | None = None
+        """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
+        saved = self._resumable() if resume else None
         if not resume:
             check_new_run_dir(self.run_dir)
         self.owns_ray = not ray.is_initialized()
@@ -125,8 +131,8 @@ class Trainer:
             start_ray(cfg)
         try:
             self._build(cfg)
-            if resume:
-                self._resume()
+            if saved is not None:
+                self._resume(saved)
         except BaseException:
             self.close()
             raise
@@ -206,8 +212,18 @@ class Trainer:
         except InvalidContextError as err:
             raise ConfigError(f"contexts: {err}") from err
 
-    def _resume(self) -> None:
+    def _resumable(self) -> dict[str, Any]:
+        """The checkpoint to resume from, refused if its run has nothing left to do."""
         payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
+        done = payload["counters"]["episodes"]
+        if payload.get("finished") and done >= self.cfg.episodes:
+            raise ConfigError(
+                f"{self.run_dir} finished its {done} episodes and its final evaluation: "
+                f"raise --episodes above {done} to train it further"
+            )
+        return payload
+
+    def _resume(self, payload: dict[str, Any]) -> None:
         try:
             self.learner.load_state_dict(payload["learner"])
         except (RuntimeError, KeyError, ValueError) as err:  # torch's mismatch report
@@ -226,7 +242,11 @@ class Trainer:
         if self.cfg.eval.keep_best and best.is_file():
             chosen = load_checkpoint(best)
             self.best = (policy_weights(chosen["learner"]), chosen["selection"])
-        log.info("resumed %s at %d episodes", self.run_dir, self.counters.episodes)
+        done = self.counters.episodes
+        dropped = trim_records(self.run_dir, done, redo_final=done >= self.cfg.episodes)
+        log.info("resumed %s at %d episodes (%d record rows after the checkpoint dropped)",
+                 self.run_dir, done, dropped)  # fmt: skip
+        self.resumed_steps = self.counters.env_steps
 
     def close(self) -> None:
         """Stop the workers, and Ray too if this trainer started it."""
@@ -240,8 +260,9 @@ class Trainer:
         """Train until ``cfg.episodes``, then evaluate greedily; return the final figures."""
         cfg = self.cfg
         self.recorder = Recorder(
-            self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress, cfg.max_minutes * 60
-        )
+            self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress,
+            cfg.max_minutes * 60, self.resumed_steps,
+        )  # fmt: skip
         self.session_start = time.perf_counter()
         self.session_steps = 0
         self.wall_base = self.counters.wall_seconds
@@ -251,17 +272,18 @@ class Trainer:
         elif self.competition.pool.has_policies:
             self.sampler.broadcast_opponents(self.competition.policies())
         try:
-            if cfg.sync:
-                self._run_sync()
-            else:
-                self._run_async()
+            with self.stop:
+                self._run_sync() if cfg.sync else self._run_async()
+            self.checkpoint()
+            if self.stop.requested:
+                raise TrainingInterrupted(self.run_dir, self.counters.episodes, self.stop.requested)
             final = self.evaluate(self.cfg.eval.final_eval_episodes, split="test")
             extra = {
                 name: self.evaluate(cfg.eval.final_eval_episodes, "test", contexts=name)
                 for name in list(self.eval_contexts)[1:]
             }
-            self.checkpoint()
             best = self._evaluate_best()
+            self.checkpoint(finished=True)
         finally:
             self.recorder.close()
             self.close()
@@ -276,9 +298,10 @@ class Trainer:
         }
 
     def _more(self) -> bool:
-        """Episodes left to play and, in this session, wall-clock budget left."""
+        """Episodes left to play, in this session wall-clock budget left, and no stop asked."""
         left = self._seconds_left()
-        return self.counters.episodes < self.cfg.episodes and (left is None or left > 0)
+        more = self.counters.episodes < self.cfg.episodes and (left is None or left > 0)
+        return more and not self.stop.requested
 
     def _seconds_left(self) -> float | None:
         """Wall-clock budget left in this session (None: no time budget)."""
@@ -297,7 +320,10 @@ class Trainer:
                 self.sampler.submit([self._request(issued + j) for j in range(n)])
                 issued += n
             left = self._seconds_left()
-            self._absorb(self.sampler.wait(timeout=None if left is None else max(left, 0.0)))
+            wait = POLL_SECONDS if left is None else min(max(left, 0.0), POLL_SECONDS)
+            landed = self.sampler.wait(timeout=wait)
+            if landed:
+                self._absorb(landed)
 
     def _run_sync(self) -> None:
         while self._more():
@@ -463,8 +489,9 @@ class Trainer:
         )
         return {**row, "chosen_at_episodes": chosen["episodes"], "validation": chosen}
 
-    def checkpoint(self) -> None:
-        """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``."""
+    def checkpoint(self, finished: bool = False) -> None:
+        """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``
+        (``finished``: after the final evaluation)."""
         save_checkpoint(
             self.run_dir / CHECKPOINT_NAME,
             config=self.cfg.to_dict(),
@@ -475,6 +502,7 @@ class Trainer:
             np_rng=self.np_rng,
             starts=self.starts.state_dict(),
             opponents=self.competition.state_dict(),
+            finished=finished,
         )
 
 

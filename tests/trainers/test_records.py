@@ -1,13 +1,22 @@
-"""The progress bar follows whichever budget, episodes or minutes, ends the run."""
+"""The progress bar follows whichever budget, episodes or minutes, ends the run; a resumed
+run's records end where its checkpoint does."""
 
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
 import pytest
 
-from neuronsmae.trainers.records import Recorder, budget_status
+from neuronsmae.trainers.records import (
+    EPISODE_COLUMNS,
+    EVAL_COLUMNS,
+    TRAIN_COLUMNS,
+    Recorder,
+    budget_status,
+    trim_records,
+)
 
 
 def test_the_wall_clock_binds_a_slow_run() -> None:
@@ -51,3 +60,52 @@ def test_the_bar_names_the_binding_budget(
     assert "2,000/30,000 ep, 10:00/30:00 (time budget binds, ETA 20:00)" in recorder.bar.desc
     recorder.close()
     assert "time budget binds" in capsys.readouterr().err
+
+
+def _write(path: Path, columns: tuple[str, ...], rows: list[dict[str, object]]) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _column(path: Path, name: str) -> list[str]:
+    with path.open(newline="") as f:
+        return [row[name] for row in csv.DictReader(f)]
+
+
+@pytest.fixture
+def killed_run(tmp_path: Path) -> Path:
+    """The records of a run killed at episode 10, its last checkpoint at 6 (after the
+    validation and the test at 6), the last episode row cut short by the kill."""
+    _write(tmp_path / "train.csv", TRAIN_COLUMNS, [{"episodes": k} for k in range(2, 11, 2)])
+    evals = [{"episodes": 3, "split": "validation"}, {"episodes": 6, "split": "validation"},
+             {"episodes": 6, "split": "test"}, {"episodes": 9, "split": "validation"}]  # fmt: skip
+    _write(tmp_path / "eval.csv", EVAL_COLUMNS, evals)
+    _write(tmp_path / "episodes.csv", EPISODE_COLUMNS,
+           [{"episode": k, "seed": 100 + k, "contexts": "{}"} for k in range(1, 11)])  # fmt: skip
+    with (tmp_path / "episodes.csv").open("a") as f:
+        f.write("11,11")
+    return tmp_path
+
+
+def test_a_resumed_run_drops_the_rows_written_after_its_checkpoint(killed_run: Path) -> None:
+    assert trim_records(killed_run, 6) == 2 + 1 + 5
+    assert _column(killed_run / "train.csv", "episodes") == ["2", "4", "6"]
+    assert _column(killed_run / "eval.csv", "split") == ["validation", "validation", "test"]
+    assert _column(killed_run / "episodes.csv", "episode") == [str(k) for k in range(1, 7)]
+    assert _column(killed_run / "episodes.csv", "seed") == [str(100 + k) for k in range(1, 7)]
+    assert trim_records(killed_run, 6) == 0  # nothing left to drop
+    assert not list(killed_run.glob("*.tmp"))
+
+
+def test_a_run_resumed_for_its_final_evaluation_drops_that_evaluation_too(
+    killed_run: Path,
+) -> None:
+    trim_records(killed_run, 6, redo_final=True)
+    assert _column(killed_run / "eval.csv", "split") == ["validation", "validation"]
+    assert _column(killed_run / "train.csv", "episodes") == ["2", "4", "6"]
+
+
+def test_trimming_a_run_without_records_is_a_no_op(tmp_path: Path) -> None:
+    assert trim_records(tmp_path, 0) == 0 and not list(tmp_path.iterdir())

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import signal
 import time
 from pathlib import Path
 
@@ -23,6 +25,7 @@ from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import ConfigError, make_config, preset
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import GreedyPolicy, evaluate_checkpoint, load_policy
+from neuronsmae.trainers.interrupt import TrainingInterrupted
 from neuronsmae.trainers.rollout import Request
 from neuronsmae.trainers.sampler import PlacementError
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, Trainer, train_seed
@@ -329,3 +332,49 @@ def test_a_worker_count_the_cluster_cannot_hold_is_refused_at_once(tmp_path: Pat
     ):
         Trainer(cfg)
     assert time.monotonic() - start < 30
+
+
+def test_a_crashed_then_stopped_run_resumes_with_every_episode_recorded_once(
+    tmp_path: Path,
+) -> None:
+    cfg = make_config(
+        {"alg": "vdn", "workers": 1, "episodes": 16, "out": str(tmp_path), "progress": False},
+        dict(kv.split("=") for kv in TINY),
+        {"checkpoint_every": 4, "eval_every": 4},
+    )
+
+    def crash(trainer: Trainer) -> None:
+        if trainer.counters.episodes >= 6:  # killed between the checkpoints at 4 and 8
+            raise RuntimeError("the machine went down")
+
+    with pytest.raises(RuntimeError, match="went down"):
+        Trainer(cfg, hook=crash).run()
+    assert _episodes_column(tmp_path / "train.csv")[-1] >= 6  # rows past the checkpoint
+
+    def ctrl_c(trainer: Trainer) -> None:
+        if trainer.counters.episodes >= 10 and not trainer.stop.requested:
+            os.kill(os.getpid(), signal.SIGINT)  # through the run's own handler
+
+    with pytest.raises(TrainingInterrupted, match="--resume") as stopped:
+        Trainer(cfg, resume=True, hook=ctrl_c).run()
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)["counters"]
+    assert saved["episodes"] == stopped.value.episodes >= 10  # saved where it stopped
+    with (tmp_path / "episodes.csv").open() as f:
+        stored = [int(r["episode"]) for r in csv.DictReader(f)]
+    assert stored == list(range(1, saved["episodes"] + 1))
+
+    result = Trainer(cfg, resume=True).run()
+    assert result["counters"]["episodes"] == 16
+    with (tmp_path / "episodes.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["episode"]) for r in rows] == list(range(1, 17))
+    # the episodes played again after the crash kept their seeds
+    assert [int(r["seed"]) for r in rows] == [
+        train_seed(cfg.seed, k, cfg.eval.eval_seed) for k in range(16)
+    ]
+    steps = _episodes_column(tmp_path / "train.csv")
+    assert steps == sorted(steps) and len(set(steps)) == len(steps) and steps[-1] == 16
+    evals = _episodes_column(tmp_path / "eval.csv")
+    assert evals == sorted(evals) and evals.count(8) == 1
+    with pytest.raises(ConfigError, match="finished its 16 episodes"):
+        Trainer(cfg, resume=True)
