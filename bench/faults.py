@@ -17,7 +17,9 @@
    land (replayed whole on a fresh actor), and that no seed is stored twice or partially.
 3. **Learner**: ``neuronsmae-train`` SIGKILLed (its whole process group) some episodes after
    a checkpoint, then ``--resume``: the episodes since the checkpoint and the replay buffer
-   are what is lost; measured: time to the first new episode, and the final counters.
+   are what is lost; measured: time to the first new episode, the final counters, and that
+   every episode is recorded once. Then the same with SIGINT (Ctrl-C), which stops the run
+   where it is with a checkpoint: only the replay buffer is lost.
 
 Writes bench/out/faults.json; exits 1 when a recovery fails.
 """
@@ -267,14 +269,25 @@ def _checkpoint_episodes(run: Path) -> int:
         return 0
 
 
-def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]:
-    run = folder / "learner"
+def _stored(run: Path) -> list[int]:
+    """The ``episode`` column of episodes.csv (one row per stored training episode)."""
+    try:
+        with (run / "episodes.csv").open() as f:
+            return [int(row["episode"]) for row in csv.DictReader(f)]
+    except (OSError, KeyError, ValueError):
+        return []
+
+
+def learner(folder: Path, how: str, episodes: int = 60, every: int = 10) -> dict[str, Any]:
+    """Stop the learner with ``how`` (``SIGKILL`` or ``SIGINT``, Ctrl-C) to its whole
+    process group some episodes after a checkpoint, then resume it to the end."""
+    run = folder / f"learner_{how}"
     pairs = {**TINY, "checkpoint_every": every}
     sets = [a for k, v in pairs.items() for a in ("--set", f"{k}={v}")]
     cmd = [sys.executable, "-m", "neuronsmae.trainers.cli", "--alg", "vdn", "--level", "easy",
            "--workers", "1", "--episodes", str(episodes), "--out", str(run), "--quiet",
            *sets]  # fmt: skip
-    log = (folder / "learner.log").open("wb")
+    log = (folder / f"learner_{how}.log").open("wb")
     first = subprocess.Popen(cmd, stdout=log, stderr=log, start_new_session=True)
     deadline = time.monotonic() + 600
     while True:  # a checkpoint, then some episodes past it
@@ -283,23 +296,31 @@ def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]
         if ckpt >= every and logged and logged[-1] >= ckpt + every // 2:
             break
         if first.poll() is not None or time.monotonic() > deadline:
-            raise RuntimeError(f"the first run ended or stalled; see {folder / 'learner.log'}")
+            raise RuntimeError(f"the first run ended or stalled; see {log.name}")
         time.sleep(0.2)
-    at_kill = _episodes_logged(run / "train.csv")[-1]
-    os.killpg(first.pid, signal.SIGKILL)  # the learner and everything it started
-    first.wait()
-    ckpt = _checkpoint_episodes(run)
-    rows_before = len(_episodes_logged(run / "train.csv"))
+    signalled = time.monotonic()
+    os.killpg(first.pid, getattr(signal, how))  # the learner and everything it started
+    first_status = first.wait(120)
+    stopped_s = time.monotonic() - signalled
+    at_stop, ckpt = max(_stored(run)), _checkpoint_episodes(run)
+    train_csv = run / "train.csv"
+    stale = (train_csv.stat().st_ino, any(e > ckpt for e in _episodes_logged(train_csv)))
+
+    def new_rows() -> list[int]:  # the resumed run's rows (it rewrites a file with stale rows)
+        if stale[1] and train_csv.stat().st_ino == stale[0]:
+            return []
+        return [e for e in _episodes_logged(train_csv) if e > ckpt]
+
     t0 = time.monotonic()
     resume = [sys.executable, "-m", "neuronsmae.trainers.cli", "--resume", "--out", str(run),
               "--quiet"]  # fmt: skip
     second = subprocess.Popen(resume, stdout=log, stderr=log, start_new_session=True)
-    first_new = caught_up = None  # the first episode after resuming; the first past at_kill
+    first_new = caught_up = None  # the first episode after resuming; the first past at_stop
     while second.poll() is None and time.monotonic() - t0 < 900:
-        new = _episodes_logged(run / "train.csv")[rows_before:]
+        new = new_rows()
         if first_new is None and new:
             first_new = time.monotonic() - t0
-        if caught_up is None and new and max(new) > at_kill:
+        if caught_up is None and new and max(new) > at_stop:
             caught_up = time.monotonic() - t0
         time.sleep(0.2)
     code = second.wait(60)
@@ -308,15 +329,19 @@ def learner(folder: Path, episodes: int = 60, every: int = 10) -> dict[str, Any]
 
     final = torch.load(run / "checkpoint.pt", weights_only=True)["counters"]
     return {
-        "episodes_at_kill": at_kill,
+        "signal": how,
+        "exit_status": first_status,
+        "stopped_after_s": stopped_s,
+        "episodes_at_stop": at_stop,
         "checkpoint_episodes": ckpt,
-        "episodes_lost": at_kill - ckpt,
+        "episodes_lost": at_stop - ckpt,
         "resume_exit_status": code,
         "resume_to_first_episode_s": first_new,
-        "resume_to_past_the_kill_s": caught_up,
+        "resume_to_past_the_stop_s": caught_up,
         "resume_to_finish_s": time.monotonic() - t0,
         "final_episodes": final["episodes"],
         "final_updates": final["updates"],
+        "every_episode_recorded_once": _stored(run) == list(range(1, episodes + 1)),
     }
 
 
@@ -344,9 +369,12 @@ def main() -> int:
             ok &= report["ray_worker"]["every_seed_stored_once"]
             ok &= report["ray_worker"]["partial_episodes_stored"] == 0
         if "learner" not in args.skip:
-            report["learner"] = learner(folder)
-            print("learner:", report["learner"])
-            ok &= report["learner"]["resume_exit_status"] == 0
+            report["learner"] = [learner(folder, how) for how in ("SIGKILL", "SIGINT")]
+            for row in report["learner"]:
+                print("learner:", row)
+                ok &= row["resume_exit_status"] == 0 and row["every_episode_recorded_once"]
+            ok &= report["learner"][1]["exit_status"] == 130  # Ctrl-C: stopped, checkpoint saved
+            ok &= report["learner"][1]["episodes_lost"] == 0
     report["ok"] = ok
     print(f"wrote {write_json('faults', report)}")
     return 0 if ok else 1
