@@ -12,8 +12,9 @@ the final weights on 200 held-out episodes at coef 1.0 (the reported figure) and
 
 Cells run one at a time, seed-major (every cell's first seed before any second seed), so a
 partial table covers every cell early. Each run has its own directory under ``--runs``; a
-run stopped half-way is resumed from its checkpoint (a time-budgeted run is started afresh:
-its budget is per session), and a run already in ``--out`` is skipped, so the same command
+run stopped half-way is resumed from its checkpoint (a time-budgeted run is started afresh,
+its old folder renamed ``<run>.stale-<time>``: its budget is per session), Ctrl-C stops the
+run in progress with a checkpoint, and a run already in ``--out`` is skipped, so the same command
 continues the table after any interruption. After each run one record is written to
 ``--out`` (atomically): alg, level, learner, seed, episodes, env steps, updates, wall
 minutes, the test win rate (and draws, losses, return) at each evaluation contexts, the run
@@ -22,10 +23,11 @@ copied to ``<out>_runs/`` (the record's ``logs``, relative to the folder of ``--
 that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*`` draws the learning curves
 whatever machine ran them. ``--env`` picks in-process arenas (the
 default here: the same episodes as served arenas, without a server process competing for
-the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key (tests use it
-for tiny runs). Prints the table so far at the end (``--report``: only that, as Markdown
-for docs/results.md: mean ± 95 % Student-t interval over seeds, each seed's figure, and
-the compute the recorded runs took). ``--test-at "coef=0.5"`` tests the recorded runs'
+the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key but those that
+name the cell (``alg``, ``level``, ``seed``, ``out``; tests use it for tiny runs). Prints
+the table so far at the end (``--report``: only that, as Markdown for docs/results.md:
+mean ± 95 % Student-t interval over seeds, each seed's figure, and the compute the
+recorded runs took). ``--test-at "coef=0.5"`` tests the recorded runs'
 final weights again with their test contexts so updated, on the same starts (their
 checkpoints must still be in ``--runs``), stores the results in the records and stops; the
 report then adds a table of them.
@@ -106,8 +108,19 @@ def cell_config(
             "progress": sys.stderr.isatty(),
         }
     )
-    layers.append(parse_overrides(args.set))
+    overrides = parse_overrides(args.set)
+    fixed = sorted(set(overrides) & set(CELL_KEYS))
+    if fixed:
+        raise ConfigError(
+            f"--set {', '.join(fixed)}: the table sets these per cell; choose cells with "
+            "--algs, --levels, --seeds, and their folder with --runs"
+        )
+    layers.append(overrides)
     return make_config(*layers)
+
+
+CELL_KEYS = ("alg", "level", "seed", "out")
+"""Config keys that make a run the cell it is recorded as: never changed by ``--set``."""
 
 
 class TableFileError(ValueError):
@@ -181,13 +194,26 @@ def keep_logs(run_dir: Path, out: Path, learner: str) -> Path:
     return dest
 
 
+def set_aside(run_dir: Path) -> Path:
+    """Rename a run folder the table cannot resume to ``<name>.stale-<time>`` (never
+    deleted: it may hold a person's files) and return the new path."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    aside = run_dir.with_name(f"{run_dir.name}.stale-{stamp}")
+    n = 1
+    while aside.exists():
+        n += 1
+        aside = run_dir.with_name(f"{run_dir.name}.stale-{stamp}-{n}")
+    run_dir.rename(aside)
+    return aside
+
+
 def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[str, Any]:
     run_dir = args.runs / args.learner / f"{alg}_{level}_s{seed}"
     cfg = cell_config(args, alg, level, seed, run_dir)
     if run_dir.exists() and (cfg.max_minutes > 0 or not (run_dir / CHECKPOINT_NAME).is_file()):
         # A time budget is per session: a resumed run would train past it; a run stopped
         # before its first checkpoint cannot be continued. Either starts afresh.
-        shutil.rmtree(run_dir)
+        print(f"{run_dir} cannot be resumed: moved to {set_aside(run_dir)}", flush=True)
     resume = (run_dir / CHECKPOINT_NAME).is_file()
     if resume:
         done = load_checkpoint(run_dir)["counters"]["episodes"]

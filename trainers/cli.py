@@ -117,7 +117,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
                 f"--resume: {probe.run_dir} holds no checkpoint.pt (the run stopped before its "
                 "first one); start it afresh instead: remove the directory, or another --out"
             )
-        base = make_config(json.loads(saved.read_text()))
+        base = saved_config(saved)
     cfg = make_config(*layers, base=base)
     if base is not None:
         check_resumable(base, cfg)
@@ -126,6 +126,29 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     if not args.resume:
         check_new_run_dir(cfg.run_dir)
     return cfg
+
+
+def make_run_dir(run_dir: Path) -> None:
+    """Create the run directory now, so that an ``--out`` that cannot be one is refused
+    before Ray and the workers start."""
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"out {str(run_dir)!r} cannot be created: {err.strerror}") from None
+
+
+def saved_config(path: Path) -> TrainConfig:
+    """The config a run saved in its ``config.json``, for ``--resume``."""
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(f"--resume: {path} is not the JSON a run writes ({err})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"--resume: {path} must hold a table of config keys")
+    try:
+        return make_config(data)
+    except ConfigError as err:
+        raise ConfigError(f"--resume: {path}: {err}") from None
 
 
 def print_config_help() -> None:
@@ -150,6 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         cfg = config_from_args(args)
+        make_run_dir(cfg.run_dir)
     except (ConfigError, OSError) as err:
         print(f"neuronsmae-train: {err}", file=sys.stderr)
         return 2

@@ -380,9 +380,14 @@ def _coerce(key: str, value: Any) -> Any:
                 raise ConfigError(f"{key} expects a bool (true/false), got {value!r}")
             return text in ("true", "1", "yes")
         try:
-            return kind(float(text)) if kind is int and "e" in text else kind(text)
+            number = float(text) if kind is int and "e" in text else kind(text)
         except ValueError:
             raise ConfigError(f"{key} expects {kind.__name__}, got {value!r}") from None
+        if isinstance(number, float) and kind is int:  # 1e5; not 2.5e0 nor 1e400
+            if not number.is_integer():
+                raise ConfigError(f"{key} expects a whole number, got {value!r}")
+            return int(number)
+        return number
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if kind is int and isinstance(value, float) and value.is_integer():

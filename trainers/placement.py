@@ -183,7 +183,20 @@ def local_cpus(cfg: TrainConfig) -> int:
     need = cfg.n_workers() * cfg.cluster.worker_cpus
     if cfg.env == "remote" and cfg.cluster.servers == "actors":
         need += cfg.n_workers() * SERVER_CPUS
-    return max(os.cpu_count() or 1, math.ceil(need) + 1)
+    cores = os.cpu_count() or 1
+    if need > MAX_OVERSUBSCRIPTION * cores:
+        raise ConfigError(
+            f"workers={cfg.n_workers()} at worker_cpus={cfg.cluster.worker_cpus} reserve "
+            f"{need:g} CPUs: a local Ray on this {cores}-core machine shares at most "
+            f"{MAX_OVERSUBSCRIPTION * cores} among its workers; give fewer workers or a smaller "
+            "worker_cpus, or join a Ray cluster (cluster.address) that has the CPUs"
+        )
+    return max(cores, math.ceil(need) + 1)
+
+
+MAX_OVERSUBSCRIPTION = 32
+"""A local Ray's CPUs may be at most this many times the machine's cores (25 workers of
+half a CPU on 2 cores need 13): beyond it, workers would only thrash the cores."""
 
 
 def start_ray(cfg: TrainConfig) -> None:

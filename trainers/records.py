@@ -14,8 +14,10 @@ ETA toward 30,000 episodes it will never play.
 from __future__ import annotations
 
 import csv
+import fcntl
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -129,6 +131,46 @@ def check_new_run_dir(run_dir: Path) -> None:
             f"{run_dir} already holds a run ({', '.join(found)}): pass --resume to continue "
             "it, another --out (or --seed) for a new run, or remove the directory"
         )
+
+
+LOCK_NAME = ".lock"
+"""The file in a run directory that a training process holds locked while it runs."""
+
+
+class RunLock:
+    """An exclusive lock on a run directory for as long as one process trains in it.
+
+    Why: two runs started at once into one directory both pass :func:`check_new_run_dir`
+    before either writes a file, then interleave their records. The lock is the kernel's
+    (``flock``): a process that dies releases it.
+    """
+
+    def __init__(self, run_dir: Path) -> None:
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            self.file = (run_dir / LOCK_NAME).open("a+")
+        except OSError as err:
+            raise ConfigError(f"out {str(run_dir)!r} cannot be created: {err}") from None
+        try:
+            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.file.seek(0)
+            holder = self.file.read().strip() or "?"
+            self.file.close()
+            raise RunExistsError(
+                f"{run_dir} is in use: another training process (pid {holder}) is running in "
+                "it; wait for it to end, or give another --out"
+            ) from None
+        self.file.seek(0)
+        self.file.truncate()
+        self.file.write(f"{os.getpid()}\n")
+        self.file.flush()
+
+    def release(self) -> None:
+        """Let another process train in the directory (idempotent)."""
+        if not self.file.closed:
+            fcntl.flock(self.file, fcntl.LOCK_UN)
+            self.file.close()
 
 
 COUNT_COLUMNS = {"train.csv": "episodes", "eval.csv": "episodes", "episodes.csv": "episode"}

@@ -60,7 +60,7 @@ from neuronsmae.trainers.interrupt import POLL_SECONDS, StopSignals, TrainingInt
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement, start_ray
-from neuronsmae.trainers.records import Recorder, check_new_run_dir, trim_records
+from neuronsmae.trainers.records import Recorder, RunLock, check_new_run_dir, trim_records
 from neuronsmae.trainers.rollout import Policy, Request
 from neuronsmae.trainers.sampler import Sampler
 from neuronsmae.trainers.symmetry import augment, parse_generators, task_group
@@ -123,9 +123,14 @@ class Trainer:
         """Turns Ctrl-C or SIGTERM into a stop request while :meth:`run` runs."""
         self.resumed_steps: int | None = None
         """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
-        saved = self._resumable() if resume else None
-        if not resume:
-            check_new_run_dir(self.run_dir)
+        self.lock = RunLock(self.run_dir)
+        try:
+            saved = self._resumable() if resume else None
+            if not resume:
+                check_new_run_dir(self.run_dir)
+        except BaseException:
+            self.lock.release()
+            raise
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
             start_ray(cfg)
@@ -254,6 +259,7 @@ class Trainer:
             self.sampler.close()
         if self.owns_ray and ray.is_initialized():
             ray.shutdown()
+        self.lock.release()
 
     # --- the loop ----------------------------------------------------------------------
     def run(self) -> dict[str, Any]:

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from bench.paper_table import interval, main, report
+from bench.paper_table import interval, main, report, set_aside
 
 
 def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper") -> dict:
@@ -73,3 +73,25 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
     assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.0
     assert row.split("|")[4].strip() == "1.000 (s1 1.000; 1 of 2 seeds)"  # s2 not yet
     assert lines[-1].startswith("| hard | QMIX | — | — |")
+
+
+@pytest.mark.parametrize("key", ["seed=7", "alg=qmix", "level=hard", "out=elsewhere"])
+def test_set_cannot_change_what_names_a_cell(
+    key: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # --set seed=7 trained every seed's cell with seed 7 and recorded them as s1, s2, ...
+    with pytest.raises(SystemExit) as stop:
+        main(["--out", str(tmp_path / "t.json"), "--runs", str(tmp_path), "--set", key])
+    assert stop.value.code == 2
+    assert f"--set {key.split('=')[0]}: the table sets these per cell" in capsys.readouterr().err
+
+
+def test_a_run_folder_that_cannot_be_resumed_is_set_aside_never_deleted(tmp_path: Path) -> None:
+    run = tmp_path / "vdn_easy_s1"
+    run.mkdir()
+    (run / "NOTES.txt").write_text("mine")
+    first = set_aside(run)
+    run.mkdir()
+    second = set_aside(run)  # twice within a second: another name
+    assert not run.exists() and first != second
+    assert (first / "NOTES.txt").read_text() == "mine" and second.name.startswith(run.name)

@@ -395,6 +395,18 @@ def test_a_local_ray_is_told_enough_cpus_for_every_worker_and_server(
     assert local_cpus(cfg) >= need + 1  # every worker and server actor placed, and the learner
 
 
+@pytest.mark.parametrize("extra", [{"workers": 100_000}, {"workers": 2, "worker_cpus": 1e6}])
+def test_a_local_ray_is_not_told_of_thousands_of_cpus(
+    extra: dict[str, float], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from neuronsmae.trainers.placement import local_cpus
+
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    # --workers 100000 started a local Ray of 50,001 CPUs and 100,000 actors on 2 cores
+    with pytest.raises(ConfigError, match="a local Ray on this 2-core machine shares at most 64"):
+        local_cpus(make_config(extra))
+
+
 def test_a_bad_checkpoint_or_cluster_is_reported_without_a_traceback(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -470,3 +482,35 @@ def test_resume_without_a_checkpoint_says_so_before_training(
     with pytest.raises(MissingCheckpointError, match="no checkpoint at") as caught:
         load_checkpoint(tmp_path)
     assert isinstance(caught.value, FileNotFoundError)  # what callers caught before
+
+
+@pytest.mark.parametrize("value", ["2.5e0", "1e400", "-1e400"])
+def test_an_integer_in_scientific_notation_must_be_whole(value: str) -> None:
+    # 2.5e0 became 2, and 1e400 an OverflowError traceback
+    with pytest.raises(ConfigError, match=f"episodes expects a whole number, got '{value}'"):
+        make_config(parse_overrides([f"episodes={value}"]))
+    assert make_config(parse_overrides(["episodes=3e4"])).episodes == 30_000
+
+
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [("not json", "is not the JSON a run writes"), ("[]", "must hold a table of config keys"),
+     ('{"bogus": 1}', "unknown config key 'bogus'")],
+)  # fmt: skip
+def test_resume_names_a_saved_config_it_cannot_read(
+    text: str, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "config.json").write_text(text)  # was a JSONDecodeError / AttributeError
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    assert main(["--resume", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"--resume: {tmp_path / 'config.json'}" in err and said in err
+
+
+def test_an_out_that_cannot_be_a_directory_is_refused_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "file").write_text("")
+    # a NotADirectoryError traceback once Ray and the workers had started
+    assert main(["--out", str(tmp_path / "file" / "sub"), "--episodes", "1"]) == 2
+    assert "cannot be created: Not a directory" in capsys.readouterr().err

@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 
 import pytest
 
+from neuronsmae.trainers.config_groups import ConfigError
 from neuronsmae.trainers.records import (
     EPISODE_COLUMNS,
     EVAL_COLUMNS,
     TRAIN_COLUMNS,
     Recorder,
+    RunExistsError,
+    RunLock,
     budget_status,
     trim_records,
 )
@@ -109,3 +113,18 @@ def test_a_run_resumed_for_its_final_evaluation_drops_that_evaluation_too(
 
 def test_trimming_a_run_without_records_is_a_no_op(tmp_path: Path) -> None:
     assert trim_records(tmp_path, 0) == 0 and not list(tmp_path.iterdir())
+
+
+def test_one_process_at_a_time_trains_in_a_run_directory(tmp_path: Path) -> None:
+    # Two runs started at once into one --out both passed the check for another run's
+    # files (written only later) and interleaved their records.
+    first = RunLock(tmp_path / "run")
+    held = rf"in use: another training process \(pid {os.getpid()}\)"
+    with pytest.raises(RunExistsError, match=held):
+        RunLock(tmp_path / "run")
+    first.release()
+    first.release()  # idempotent
+    RunLock(tmp_path / "run").release()  # free again
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError, match="cannot be created"):
+        RunLock(tmp_path / "file" / "run")
