@@ -1,6 +1,6 @@
 """In-process speed of the arena against bare PyBullet stepping of the same world.
 
-    python bench/bench_env.py [--seconds 3] [--repeats 5]
+    python -m bench.bench_env [--seconds 3] [--repeats 5]
 
 Measures decisions per second for 2 v 2 with the full referee in each action space (and
 with LiDAR), and, interleaved in the same run, two baselines on the same PyBullet world with

@@ -3,11 +3,15 @@
 Runs ``neuronsmae.trainers`` with the default configuration (plus ``--set`` overrides),
 stops after ``--minutes`` of wall time (or ``--episodes``), evaluates the greedy policy on
 ``--final-eval`` held-out seeds, prints the learning curve as a table, and writes
-``bench/out/learning_<alg>_<level>_<stamp>.json`` with the greedy win rate against env
-steps and wall time. The project's target: VDN against the easy bot reaches a greedy win
-rate of at least 0.9 within 30 minutes on a 2-core machine::
+``bench/out/learning_<alg>_<level>_<stamp>.json`` (``--out DIR``: into DIR; the name
+carries the start time, so no report is replaced) with the greedy win rate against env
+steps and wall time. The run trains in ``runs/bench_<alg>_<level>_<stamp>`` (``--set
+out=DIR``: in DIR, which must not hold a run; the bench always starts a new one). The
+overrides, the run folder and ``--out`` are checked before training starts. Run it from
+the repository root as a module. The project's target: VDN against the easy bot reaches a
+greedy win rate of at least 0.9 within 30 minutes on a 2-core machine::
 
-    python bench/bench_learning.py --alg vdn --level easy --minutes 30 --workers 2
+    python -m bench.bench_learning --alg vdn --level easy --minutes 30 --workers 2
 """
 
 from __future__ import annotations
@@ -22,8 +26,17 @@ from pathlib import Path
 from typing import Any
 
 from bench.common import at_least, non_negative
-from neuronsmae.trainers.config import LEVELS, TrainConfig, make_config, parse_overrides
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.trainers.config import (
+    LEVELS,
+    ConfigError,
+    TrainConfig,
+    make_config,
+    parse_overrides,
+)
 from neuronsmae.trainers.mixers import ALGORITHMS
+from neuronsmae.trainers.outputs import check_folder
+from neuronsmae.trainers.records import RunExistsError, check_new_run_dir
 from neuronsmae.trainers.train import train
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -58,7 +71,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--eval-episodes", type=at_least(1), default=50)
     p.add_argument("--final-eval", type=at_least(1), default=200, help="episodes of the final eval")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    p.add_argument("--out", type=Path, default=OUT)
+    p.add_argument(
+        "--out", type=Path, default=OUT, metavar="DIR", help="folder of the JSON report (bench/out)"
+    )
     return p.parse_args(argv)
 
 
@@ -96,11 +111,42 @@ def bench_config(args: argparse.Namespace, run_dir: Path) -> TrainConfig:
     )
 
 
+def prepare(args: argparse.Namespace, stamp: str) -> tuple[TrainConfig, Path]:
+    """The run's configuration and the report's path, checked before any training: the
+    ``--set`` overrides, a new and writable run folder, a writable ``--out`` folder. Raises
+    :class:`InvalidOptionError` naming the flag."""
+    try:
+        cfg = bench_config(args, Path("runs") / f"bench_{args.alg}_{args.level}_{stamp}")
+    except ConfigError as exc:
+        said = str(exc)
+        raise InvalidOptionError(said if "--set" in said else f"--set: {said}") from None
+    run_dir = Path(cfg.out)
+    if not str(cfg.out).strip():
+        raise InvalidOptionError("--set out= needs a folder for the run")
+    try:
+        check_new_run_dir(run_dir)
+    except RunExistsError:
+        raise InvalidOptionError(
+            f"--set out={cfg.out}: that folder already holds a run; this bench always starts "
+            "a new run (it has no --resume): give another out, or remove the folder"
+        ) from None
+    check_folder(run_dir, f"--set out={cfg.out}")
+    check_folder(args.out, "--out")
+    report = args.out / f"learning_{args.alg}_{args.level}_{stamp}.json"
+    if report.exists():
+        raise InvalidOptionError(f"--out {args.out} already holds {report.name}")
+    return cfg, report
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and write its JSON report."""
     args = parse_args(argv)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    cfg = bench_config(args, Path("runs") / f"bench_{args.alg}_{args.level}_{stamp}")
+    try:
+        cfg, path = prepare(args, stamp)
+    except InvalidOptionError as exc:
+        print(f"bench.bench_learning: error: {exc}", file=sys.stderr)
+        return 2
     start = time.perf_counter()
     result = train(cfg)
     total = time.perf_counter() - start
@@ -143,8 +189,7 @@ def main(argv: list[str] | None = None) -> int:
             "platform": platform.platform(),
         },
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"learning_{args.alg}_{args.level}_{stamp}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=2))
     print(f"wrote {path}")
     return 0

@@ -1,5 +1,12 @@
 """Shared helpers for the benchmark scripts: timing by medians, CPU clocks, argparse types
-for their options, tables and JSON output."""
+for their options, tables and JSON output.
+
+Output convention: a script's JSON goes to the git-ignored ``bench/out/<name>.json``
+(:func:`write_json`), replaced by its next run (copies worth keeping go to ``docs/data/``).
+A script that takes ``--out FILE`` (:func:`add_out`) writes there instead and refuses a
+FILE that exists unless ``--force`` is given, checked before the work starts
+(:func:`out_problem`); the file is written whole or not at all (:func:`write_out`).
+"""
 
 from __future__ import annotations
 
@@ -19,8 +26,10 @@ import numpy as np
 import psutil
 
 from neuronsmae.client import answering_pid
+from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.launch import ServerCommand, ServerProcess
 from neuronsmae.protocol.messages import MAX_ARENAS
+from neuronsmae.trainers.outputs import check_file
 
 OUT = Path(__file__).resolve().parent / "out"
 MAX_PORT = 65_535
@@ -153,6 +162,47 @@ def write_json(name: str, payload: dict[str, Any]) -> Path:
     OUT.mkdir(parents=True, exist_ok=True)
     path = OUT / f"{name}.json"
     path.write_text(json.dumps(payload, indent=2))
+    return path
+
+
+def add_out(parser: argparse.ArgumentParser, name: str | None = None) -> None:
+    """``--out FILE`` and ``--force`` (module docstring: the output convention); ``name``:
+    the default ``bench/out/<name>.json``, else ``--out`` is required."""
+    where = "" if name is None else f" (default: bench/out/{name}.json, replaced each run)"
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=name is None,
+        metavar="FILE.json",
+        help=f"JSON file to write{where}; an existing one only with --force",
+    )
+    parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+
+
+def out_problem(path: Path | None, force: bool) -> str | None:
+    """Why the JSON file ``path`` (``--out``) must not be written, or None: not a ``.json``
+    name, a folder, a file that exists (unless ``force``), or a folder that cannot be
+    created or written into. None for ``path`` None (:func:`write_json`'s default)."""
+    if path is None:
+        return None
+    if path.suffix != ".json" or path.is_dir():
+        return f"--out must name a .json file, got {str(path)!r}"
+    if path.exists() and not force:
+        return f"--out {path} exists; choose another file, or pass --force to replace it"
+    try:
+        check_file(path, "--out")
+    except InvalidOptionError as exc:
+        return str(exc)
+    return None
+
+
+def write_out(path: Path, payload: dict[str, Any], indent: int = 2) -> Path:
+    """Write ``payload`` as JSON to ``path`` whole or not at all (a temporary file beside
+    it, renamed over it); return ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial")
+    partial.write_text(json.dumps(payload, indent=indent))
+    partial.replace(path)
     return path
 
 

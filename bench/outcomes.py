@@ -1,6 +1,7 @@
 """How a trained checkpoint's games end: decided early or at the time limit, and by how much.
 
-    python -m bench.outcomes RUN_DIR/checkpoint.pt [--level easy] [--episodes 80] [--seed S]
+    python -m bench.outcomes RUN_DIR/checkpoint.pt [--level easy] [--episodes 80] [--seed S] \
+        [--out FILE.json [--force]]
 
 Plays the checkpoint greedily against the bot (in process, episode ``k`` reset with seed
 ``S + k``, the same starts the trainer's test split uses when ``S = 10⁹ + 10⁷``) and
@@ -8,7 +9,8 @@ records for every episode its winner, its length in decisions, each team's HP an
 left, the damage each team dealt per bullet fired, the decision after which each team had
 no bullets left, the kills, and the agents' own value of the start (their team Q at the
 first decision). Prints the episodes that were not won, a summary table, the win rate by
-fifth of that value, and writes ``bench/out/outcomes.json``. Why: the win rate alone cannot
+fifth of that value, and writes ``bench/out/outcomes.json`` (replaced by the next run), or
+``--out FILE.json`` (an existing one only with ``--force``). Why: the win rate alone cannot
 tell a policy that loses by being destroyed from one that loses close races on HP at the
 time limit, which call for different fixes (see docs/results.md); nor starts the agents
 judge bad from games they expected to win and then lost.
@@ -19,13 +21,26 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
+import sys
 import time
 from typing import Any
 
 import numpy as np
 import torch
 
-from bench.common import at_least, machine, table, write_json
+from bench.common import (
+    add_out,
+    at_least,
+    between,
+    machine,
+    out_problem,
+    table,
+    write_json,
+    write_out,
+)
+from neuronsmae.protocol.errors import NeuronsMAEError
+from neuronsmae.protocol.messages import MAX_SEED
+from neuronsmae.protocol.policies import layout_differences
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.sim.field import START_BULLETS
 from neuronsmae.trainers.config import TrainConfig
@@ -143,18 +158,37 @@ def by_opening_value(games: list[dict[str, Any]], parts: int = 5) -> list[dict[s
     return rows
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
+    """Play the games, print the tables and write the JSON report."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("checkpoint", help="checkpoint file or run directory")
     parser.add_argument("--level", default="easy", choices=["easy", "middle", "hard"])
     parser.add_argument("--episodes", type=at_least(1), default=80)
-    parser.add_argument("--seed", type=at_least(0), default=TEST_SEED)
-    args = parser.parse_args()
+    parser.add_argument("--seed", type=between(0, MAX_SEED), default=TEST_SEED,
+                        help=f"the first episode's seed, in [0, {MAX_SEED}]")  # fmt: skip
+    add_out(parser, "outcomes")
+    args = parser.parse_args(argv)
+    if args.seed + args.episodes - 1 > MAX_SEED:
+        parser.error(f"--seed {args.seed} with --episodes {args.episodes} runs past the "
+                     f"largest seed {MAX_SEED} (episode k plays seed + k)")  # fmt: skip
+    problem = out_problem(args.out, args.force)
+    if problem is not None:
+        parser.error(problem)
     torch.set_num_threads(1)
-    policy = GreedyPolicy(args.checkpoint)
+    try:
+        policy = GreedyPolicy(args.checkpoint)
+    except NeuronsMAEError as exc:  # a missing, unreadable or foreign checkpoint (named)
+        parser.error(str(exc))
     arena = Arena(seed=0, **MatchPolicy.options)  # the task the trainers' agents are built for
     try:
-        limit = int(arena.get_env_info()["episode_limit"])
+        info = arena.get_env_info()
+        differ = layout_differences(policy.spec.env_info, info)
+        if differ:
+            parser.error(
+                f"{args.checkpoint} was trained on another layout than this bench's 2 v 2 "
+                f"abstract task ({'; '.join(differ)})"
+            )
+        limit = int(info["episode_limit"])
         games = [play(policy, arena, args.level, args.seed + k) for k in range(args.episodes)]
     finally:
         arena.close()
@@ -182,8 +216,10 @@ def main() -> None:
         "machine": machine(),
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    print(f"wrote {write_json('outcomes', report)}")
+    path = write_json("outcomes", report) if args.out is None else write_out(args.out, report)
+    print(f"wrote {path}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

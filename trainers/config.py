@@ -131,7 +131,7 @@ class TrainConfig:
     workers: int = 0
     """Rollout workers (Ray actors); 0 means one per core less one for the learner, and at
     least two. Measured on 2 cores: two half-CPU workers beside the learner play 25 % more
-    episodes in 30 minutes than one (``python bench/bench_learning.py --workers 1`` against
+    episodes in 30 minutes than one (``python -m bench.bench_learning --workers 1`` against
     the default two)."""
     envs_per_worker: int = 8
     """Arenas each worker plays at once, in [1, 64], with one batched forward pass of the

@@ -84,7 +84,7 @@ class LearnerConfig:
 
     lr: float = 5e-4
     """Adam learning rate, > 0 (paper: 5e-4). Measured against the easy bot: 1e-3 reaches
-    0.8 sooner but stays there, 5e-4 climbs higher (``python bench/bench_learning.py --set
+    0.8 sooner but stays there, 5e-4 climbs higher (``python -m bench.bench_learning --set
     lr=1e-3`` against the defaults)."""
     gamma: float = 0.99
     """Discount in [0, 1] (paper: 0.99)."""
@@ -113,7 +113,7 @@ class LearnerConfig:
     Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
     while λ > 0 still moves a win's +20 back faster. Measured against the easy bot in 30
     minutes on 2 cores, test win rate over seeds 1-3: 0.89 / 0.885 / 0.86 with 0.3, 0.90 /
-    0.86 with 0.1 (seeds 1-2), 0.86 / 0.875 with 0.6 (``python bench/bench_learning.py
+    0.86 with 0.1 (seeds 1-2), 0.86 / 0.875 with 0.6 (``python -m bench.bench_learning
     --set td_lambda=0.6 --seed 2``)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
@@ -135,7 +135,7 @@ class LearnerConfig:
     (swap the agents), see trainers/symmetry.py, or auto: every one the task has (all three
     on the default 2 v 2; trainers/task.py). Against the easy bot all three reach the 0.85
     plateau in about half the episodes, but not higher (measured: 0.74-0.86 after 1,000
-    episodes against 0.625-0.78 with ``python bench/bench_learning.py --set augment=none``)."""
+    episodes against 0.625-0.78 with ``python -m bench.bench_learning --set augment=none``)."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True

@@ -16,7 +16,10 @@ order (pairs in player order, games in episode order), a draw as a tie. Each pla
 holds each row player's score against each column player (wins plus half the draws, over
 their games) and is drawn as a picture. ``--out DIR`` writes ``league.json`` (players,
 ratings, matrix, every pair's results), ``league.md`` (the table) and ``league.png`` (the
-matrix).
+matrix); a folder that already holds one of them is refused, never overwritten.
+
+Before the first game every policy is loaded once and the ``--out`` folder is checked, so
+an unreadable snapshot or an unwritable folder is reported at once, not after the games.
 """
 
 from __future__ import annotations
@@ -34,10 +37,13 @@ import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.levels import LEVEL_ARGS
-from neuronsmae.trainers.match import parse_option, play
+from neuronsmae.trainers.match import Side, parse_option, play
+from neuronsmae.trainers.outputs import check_folder
 
 SNAPSHOTS = "snapshots"
 CHECKPOINT = "checkpoint.pt"
+RESULTS = ("league.json", "league.md", "league.png")
+"""The files ``--out`` receives."""
 
 
 @dataclass(frozen=True)
@@ -89,14 +95,37 @@ def _short(path: Path) -> str:
     return f"{run.name}/{path.stem}"
 
 
+def check_players(players: Sequence[Player]) -> None:
+    """Load every policy once, so an unreadable one is named before the first game rather
+    than after the pairs before it have been played."""
+    for player in players:
+        if player.spec not in LEVEL_ARGS:
+            Side.of(player.spec, f"player {player.name}")
+
+
+def check_out(out: Path) -> None:
+    """Refuse an ``--out`` folder that holds a league's results already, or that cannot be
+    created or written into (before any game)."""
+    if out.exists() and not out.is_dir():
+        raise InvalidOptionError(f"--out {out} exists and is not a directory")
+    taken = [name for name in RESULTS if (out / name).exists()]
+    if taken:
+        raise InvalidOptionError(
+            f"--out {out} already holds a league's results ({', '.join(taken)}), which this "
+            "league would overwrite; choose another --out or remove them"
+        )
+    check_folder(out, "--out")
+
+
 def run_league(players: Sequence[Player], games: int, seed: int, **where: Any) -> dict[str, Any]:
     """Every pair's games, the OpenSkill ratings and the score matrix (module docstring).
     ``where``: :func:`~neuronsmae.trainers.match.play`'s ``arenas``, ``port``,
-    ``servers`` and ``options``."""
+    ``servers`` and ``options``. Every player is loaded before the first game."""
     from openskill.models import PlackettLuce
 
     if games < 1:
         raise InvalidOptionError(f"--games must be at least 1, got {games}")
+    check_players(players)
     model = PlackettLuce()
     ratings = [model.rating(name=p.name) for p in players]
     n = len(players)
@@ -191,7 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--servers", type=int, help="play on this many private servers")
     p.add_argument("--option", type=parse_option, action="append", default=[],
                    metavar="KEY=VALUE", help="an arena option, repeatable")  # fmt: skip
-    p.add_argument("--out", type=Path, help="write league.json, league.md and league.png here")
+    p.add_argument("--out", type=Path,
+                   help="write league.json, league.md and league.png into this folder, which "
+                   "must not hold them already")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the league as JSON")
     return p
 
@@ -203,8 +234,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.arenas < 1 or (args.servers is not None and args.servers < 1):
         parser.error(f"--arenas and --servers must be at least 1, got {args.arenas} and "
                      f"{args.servers}")  # fmt: skip
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} exists and is not a directory")
+    if args.games < 1:
+        parser.error(f"--games must be at least 1, got {args.games}")
+    if args.out is not None:
+        try:
+            check_out(args.out)
+        except InvalidOptionError as exc:
+            parser.error(str(exc))
     bots = [b.strip() for b in args.bots.split(",") if b.strip()]
     try:
         players = expand(args.entries, bots)
@@ -215,12 +251,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (NeuronsMAEError, OSError) as exc:
         print(f"neuronsmae-league: {exc}", file=sys.stderr)
         return 2
+    print(json.dumps(league) if args.json else table_text(league), end="")  # kept if a write fails
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "league.json").write_text(json.dumps(league, indent=2))
-        (args.out / "league.md").write_text(table_text(league))
-        draw_matrix(league, args.out / "league.png")
-    print(json.dumps(league) if args.json else table_text(league), end="")
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / "league.json").write_text(json.dumps(league, indent=2))
+            (args.out / "league.md").write_text(table_text(league))
+            draw_matrix(league, args.out / "league.png")
+        except OSError as exc:
+            print(f"neuronsmae-league: --out {args.out}: {exc}", file=sys.stderr)
+            return 2
     return 0
 
 

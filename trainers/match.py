@@ -16,7 +16,8 @@ arenas, in process or on servers (``--port``: the servers there, ``--servers N``
 ones). Episode ``i`` is reset with seed ``seed + i``, so the same arguments give the same
 numbers, in process or served. ``--record DIR`` writes every episode as a replayable
 recording (``neuronsmae-replay``); ``--gif OUT`` draws the first episode, re-simulated in
-process from its recording.
+process from its recording (``OUT`` is replaced if it exists; its folder is checked before
+the first episode).
 
 This module imports neither torch nor the simulator at import time: a bot match needs
 neither the trainers' extra nor, over servers, PyBullet.
@@ -48,6 +49,7 @@ from neuronsmae.protocol.recording import (
     recording_name,
     write_recording,
 )
+from neuronsmae.trainers.outputs import check_file, check_folder
 
 Z95 = 1.959963984540054
 
@@ -207,6 +209,10 @@ def play(
             f"record: {record} already holds {len(found)} recording(s) ({found[0].name}, ...), "
             "which this match's would overwrite; record into an empty or new folder"
         )
+    if record is not None:
+        check_folder(record, "--record")
+    if gif is not None:
+        check_file(gif, "--gif")
     k = min(arenas, episodes)
     env = open_arenas(seed, k, setup.options, port, servers)
     try:
@@ -345,7 +351,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--record", type=Path, metavar="DIR",
         help="write every episode's recording here (see neuronsmae-replay)",
     )  # fmt: skip
-    p.add_argument("--gif", type=Path, metavar="OUT", help="draw the first episode as a GIF")
+    p.add_argument(
+        "--gif", type=Path, metavar="OUT",
+        help="draw the first episode as a GIF (replaced if it exists)",
+    )  # fmt: skip
     return p
 
 

@@ -10,7 +10,9 @@ environment steps. The greedy evaluations (``eval.csv``) are the measure the pap
 so where the level is known its final win rate against that bot is drawn as a dotted line.
 
 It reads only the files, never a checkpoint, so it plots runs still in progress and runs
-copied from another machine alike; matplotlib comes with the ``train`` extra.
+copied from another machine alike; matplotlib comes with the ``train`` extra. A run named
+twice (directly or inside a folder named too) is refused: it would count twice in the
+mean and spread. ``--out`` is replaced if it exists.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import MissingDependencyError, NeuronsMAEError
+from neuronsmae.protocol.errors import InvalidOptionError, MissingDependencyError, NeuronsMAEError
+from neuronsmae.trainers.outputs import check_file
 
 PAPER_WIN_RATE: dict[str, dict[str, float]] = {
     "easy": {"iql": 0.75, "vdn": 0.93, "qmix": 0.89},
@@ -58,16 +61,35 @@ class Run:
     eval: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent.
+NEEDS = {
+    "train.csv": ("episodes", "env_steps", "train_win_rate", "train_return"),
+    "eval.csv": ("episodes", "env_steps", "win_rate", "mean_return"),
+}
+"""The columns each records file must have to be plotted."""
+
+
+def read_csv(path: Path, needs: Sequence[str] = ()) -> dict[str, np.ndarray]:
+    """Columns of a records CSV as float arrays (blank cells → NaN); empty if absent or
+    without rows yet. A header that lacks a column of ``needs`` is refused by name.
 
     Of ``eval.csv`` only the periodic (validation) rows form the curve: the final test-seed
     rows repeat the last step with other seeds or other weights.
     """
     if not path.is_file():
         return {}
-    with path.open(newline="") as f:
-        rows = [r for r in csv.DictReader(f) if r.get("split") in (None, "", "validation")]
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            rows = [r for r in reader if r.get("split") in (None, "", "validation")]
+            columns = reader.fieldnames
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise RunDirError(f"{path} is not a records CSV: {exc}") from None
+    missing = [c for c in needs if columns is not None and c not in columns]
+    if missing:
+        raise RunDirError(
+            f"{path} lacks the column(s) {missing} (it has {list(columns or [])}): "
+            "not a neuronsmae-train records file"
+        )
     if not rows:
         return {}
     return {key: np.array([_num(r.get(key)) for r in rows]) for key in rows[0]}
@@ -83,29 +105,46 @@ def _num(text: str | None) -> float:
 def find_runs(paths: Iterable[str | Path]) -> list[Path]:
     """Run directories named by ``paths``: each one, or the run directories inside it."""
     found: list[Path] = []
-    for p in map(Path, paths):
+    named: dict[Path, tuple[Path, str]] = {}  # resolved run → (as first found, by which arg)
+    for arg in paths:
+        p = Path(arg)
         if (p / "config.json").is_file():
-            found.append(p)
+            runs = [p]
         elif p.is_dir() and (inner := sorted(c.parent for c in p.glob("*/config.json"))):
-            found += inner
+            runs = inner
         else:
             raise RunDirError(f"{p} is not a run directory (no config.json) and holds none")
+        for run in runs:
+            key = run.resolve()
+            if key in named:
+                first, given = named[key]
+                raise RunDirError(
+                    f"run {first} is named twice (by {given!r} and {str(arg)!r}): it would "
+                    "count twice in the mean and spread; name each run once"
+                )
+            named[key] = (run, str(arg))
+            found.append(run)
     return found
 
 
 def load_run(path: Path) -> Run:
     """Read one run directory."""
     try:
-        config = json.loads((path / "config.json").read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise RunDirError(f"{path}/config.json is unreadable: {exc}") from exc
+        config = json.loads((path / "config.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:  # ValueError: bad JSON or not UTF-8
+        raise RunDirError(f"{path}/config.json is unreadable: {exc}") from None
+    if not isinstance(config, dict):
+        raise RunDirError(
+            f"{path}/config.json is not a run's configuration: a JSON "
+            f"{type(config).__name__}, not an object"
+        )
     return Run(
         path=path,
         alg=str(config.get("alg", "?")),
         level=str(config.get("level", "?")),
         seed=config.get("seed"),
-        train=read_csv(path / "train.csv"),
-        eval=read_csv(path / "eval.csv"),
+        train=read_csv(path / "train.csv", NEEDS["train.csv"]),
+        eval=read_csv(path / "eval.csv", NEEDS["eval.csv"]),
     )
 
 
@@ -243,7 +282,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point; returns the exit status."""
     p = argparse.ArgumentParser(prog="neuronsmae-plot", description=__doc__.split("\n")[0])
     p.add_argument("runs", nargs="+", help="run directories, or directories of them")
-    p.add_argument("--out", type=Path, default=Path("curves.png"), help="PNG to write")
+    p.add_argument(
+        "--out", type=Path, default=Path("curves.png"), help="PNG to write (replaced if it exists)"
+    )
     p.add_argument(
         "--source",
         choices=("eval", "train", "both"),
@@ -259,6 +300,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.out.suffix.lower() != ".png" or args.out.is_dir():
         p.error(f"--out must name a .png file, got {str(args.out)!r}")
+    try:
+        check_file(args.out, "--out")
+    except InvalidOptionError as exc:
+        p.error(str(exc))
     try:
         runs = [load_run(path) for path in find_runs(args.runs)]
         out = plot_runs(runs, args.out, args.source, args.title, args.by_run)

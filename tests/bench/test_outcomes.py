@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
+import pytest
+
+from bench import outcomes
 from bench.outcomes import by_opening_value, summarize
+from neuronsmae.protocol.messages import MAX_SEED
 
 
 def _game(
@@ -81,3 +87,64 @@ def test_win_rate_by_fifth_of_the_agents_own_opening_value() -> None:
     assert [r["win_rate"] for r in rows] == [0.5, 0.0, 1.0, 1.0, 1.0]
     assert [r["episodes"] for r in rows] == [2] * 5
     assert len(by_opening_value(games[:3])) == 3  # fewer games than fifths: no empty rows
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from tests.trainers.checkpoints import make_checkpoint
+
+    return make_checkpoint(tmp_path_factory.mktemp("ckpt") / "a.pt", 1)
+
+
+def test_bad_checkpoints_seeds_and_outputs_are_usage_errors(
+    checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """A corrupt or missing checkpoint and a seed past the largest were tracebacks."""
+    monkeypatch.setattr(outcomes, "play", lambda *a, **k: pytest.fail("played"))
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    kept = tmp_path / "keep.json"
+    kept.write_text("{}")
+    (tmp_path / "file").write_text("a file")
+    cases = [
+        ([str(junk)], "junk.pt is not a NeuronsMAE checkpoint"),
+        ([str(tmp_path / "nowhere.pt")], "nowhere.pt"),
+        ([str(checkpoint), "--seed", "99999999999999999999"], "must be in [0, "),
+        ([str(checkpoint), "--seed", str(MAX_SEED), "--episodes", "2"], "past the largest seed"),
+        ([str(checkpoint), "--out", str(kept)], "pass --force to replace it"),
+        ([str(checkpoint), "--out", str(tmp_path / "file" / "o.json")], "is a file, not a folder"),
+        ([str(checkpoint), "--out", str(tmp_path / "o.txt")], "--out must name a .json file"),
+    ]
+    for argv, said in cases:
+        with pytest.raises(SystemExit) as exc:
+            outcomes.main(argv)
+        assert exc.value.code == 2
+        assert said in capsys.readouterr().err
+    assert kept.read_text() == "{}"
+
+
+def test_a_checkpoint_of_another_layout_is_refused_before_playing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tests.trainers.checkpoints import make_checkpoint
+
+    monkeypatch.setattr(outcomes, "play", lambda *a, **k: pytest.fail("played"))
+    three = make_checkpoint(tmp_path / "3v3.pt", 3, n_blue=3, n_red=3)
+    with pytest.raises(SystemExit):
+        outcomes.main([str(three)])
+    assert "was trained on another layout" in capsys.readouterr().err
+
+
+def test_out_receives_the_report_and_bench_out_is_left_alone(
+    checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    game = _game("red", 50, (1.0, 2.0), (0, 0))
+    monkeypatch.setattr(outcomes, "play", lambda *a, **k: dict(game))
+    monkeypatch.setattr(outcomes, "write_json", lambda *a: pytest.fail("wrote bench/out"))
+    out = tmp_path / "o.json"
+    assert outcomes.main([str(checkpoint), "--episodes", "3", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["checkpoint"] == str(checkpoint) and len(report["games"]) == 3
+    assert outcomes.main([str(checkpoint), "--episodes", "1", "--out", str(out), "--force"]) == 0
+    assert len(json.loads(out.read_text())["games"]) == 1

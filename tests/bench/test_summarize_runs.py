@@ -86,3 +86,78 @@ def test_bad_runs_and_outputs_are_usage_errors_naming_them(
         assert exc.value.code == 2
         assert said in capsys.readouterr().err
     assert not Path(out).exists()
+
+
+def test_an_existing_out_is_kept_unless_force_is_given(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An earlier summary was replaced silently."""
+    monkeypatch.setenv("NEURONSMAE_COMMIT", "abc123")
+    run = _run(tmp_path)
+    out = tmp_path / "keep.json"
+    out.write_text('{"an": "earlier summary"}')
+    with pytest.raises(SystemExit) as exc:
+        main([f"a={run}", "--out", str(out)])
+    assert exc.value.code == 2
+    assert f"--out {out} exists; choose another file, or pass --force" in capsys.readouterr().err
+    assert json.loads(out.read_text()) == {"an": "earlier summary"}
+    assert main([f"a={run}", "--out", str(out), "--force"]) == 0
+    assert json.loads(out.read_text())["runs"][0]["name"] == "a"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def _broken(tmp_path: Path, how: str) -> Path:
+    """A finished run with one defect ``how``."""
+    run = _run(tmp_path)
+    if how == "header-only train.csv":
+        _write(run / "train.csv", TRAIN_COLUMNS, [])
+    elif how == "eval.csv without split":
+        rows = list(csv.DictReader((run / "eval.csv").open()))
+        columns = tuple(c for c in EVAL_COLUMNS if c != "split")
+        _write(run / "eval.csv", columns, [{k: r[k] for k in columns} for r in rows])
+    elif how == "only best test rows":
+        rows = [r for r in csv.DictReader((run / "eval.csv").open()) if r["weights"] != "latest"]
+        _write(run / "eval.csv", EVAL_COLUMNS, rows)
+    elif how == "non-numeric cell":
+        rows = list(csv.DictReader((run / "eval.csv").open()))
+        rows[1]["win_rate"] = "abc"
+        _write(run / "eval.csv", EVAL_COLUMNS, rows)
+    elif how == "non-UTF-8 train.csv":
+        (run / "train.csv").write_bytes(b"updates,wall_seconds\n\xff\xfe,1\n")
+    elif how == "config.json a list":
+        (run / "config.json").write_text("[1, 2]")
+    return run
+
+
+@pytest.mark.parametrize(
+    ("how", "said"),
+    [
+        ("header-only train.csv", "train.csv has no rows"),
+        ("eval.csv without split", "eval.csv lacks the column(s) ['split']"),
+        ("only best test rows", "eval.csv has no test row of the final weights"),
+        ("non-numeric cell", "eval.csv line 3, column 'win_rate': expected a number, got 'abc'"),
+        ("non-UTF-8 train.csv", "train.csv is not a records CSV"),
+        ("config.json a list", "config.json is not a run's configuration: not an object"),
+    ],
+)
+def test_a_malformed_run_is_a_usage_error_naming_the_file(
+    how: str, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each was a traceback (IndexError, KeyError, a ValueError naming no file)."""
+    run = _broken(tmp_path, how)
+    out = tmp_path / "s.json"
+    with pytest.raises(SystemExit) as exc:
+        main([f"a={run}", "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"{run}/{said}" in err or (said in err and str(run) in err)
+    assert not out.exists()
+
+
+def test_an_out_in_an_unwritable_place_is_refused_before_reading_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "file").write_text("a file")
+    with pytest.raises(SystemExit):
+        main([f"a={tmp_path / 'nowhere'}", "--out", str(tmp_path / "file" / "s.json")])
+    assert f"{tmp_path / 'file'} is a file, not a folder" in capsys.readouterr().err

@@ -99,3 +99,70 @@ def test_an_out_that_is_a_file_is_refused_before_the_league_is_played(
         main(["--bots", "easy,hard", "--out", str(taken)])
     assert exc.value.code == 2
     assert f"--out {taken} exists and is not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kept", ["league.json", "league.md", "league.png"])
+def test_an_out_holding_a_leagues_results_is_refused_before_any_game(
+    kept: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """A second league into the same folder replaced the first one's results."""
+    from neuronsmae.trainers import league
+
+    monkeypatch.setattr(league, "play", lambda *a, **k: pytest.fail("played"))
+    out = tmp_path / "lg"
+    out.mkdir()
+    (out / kept).write_text("an earlier league's")
+    with pytest.raises(SystemExit) as exc:
+        main(["--bots", "easy,hard", "--games", "2", "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--out {out} already holds a league's results ({kept})" in err
+    assert "choose another --out or remove them" in err
+    assert (out / kept).read_text() == "an earlier league's"
+
+
+@pytest.mark.parametrize("where", ["/proc/lg", "file/x"])
+def test_an_out_that_cannot_be_written_is_refused_before_any_game(
+    where: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """Both ended in a FileNotFoundError/NotADirectoryError traceback after every game."""
+    from neuronsmae.trainers import league
+
+    monkeypatch.setattr(league, "play", lambda *a, **k: pytest.fail("played"))
+    (tmp_path / "file").write_text("a file")
+    out = Path(where) if where.startswith("/") else tmp_path / where
+    with pytest.raises(SystemExit) as exc:
+        main(["--bots", "easy,hard", "--games", "2", "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}: " in err
+    assert ("cannot create the folder /proc/lg" if where.startswith("/") else
+            f"{tmp_path / 'file'} is a file, not a folder") in err  # fmt: skip
+
+
+def test_an_empty_new_out_is_checked_but_not_left_behind(tmp_path: Path) -> None:
+    from neuronsmae.trainers.league import check_out
+
+    check_out(tmp_path / "a" / "b")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_unreadable_snapshot_is_named_before_the_first_game(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A junk snapshot among good ones failed only when its first pair came up."""
+    from neuronsmae.trainers import league
+
+    snaps = tmp_path / "snaps" / "snapshots"
+    snaps.mkdir(parents=True)
+    make_checkpoint(snaps / "self_00000000.pt", 1)
+    (snaps / "self_00000010.pt").write_bytes(b"not a checkpoint")
+    make_checkpoint(snaps / "self_00000020.pt", 2)
+    monkeypatch.setattr(league, "play", lambda *a, **k: pytest.fail("played"))
+    out = tmp_path / "lg"
+    assert main([str(tmp_path / "snaps"), "--bots", "", "--games", "40", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "self_00000010.pt is not a NeuronsMAE checkpoint" in err
+    assert not out.exists()

@@ -83,6 +83,36 @@ def test_a_record_dir_holding_recordings_is_refused_before_playing(
         M.play("easy", "easy", 2, 0, record=tmp_path)
 
 
+@pytest.mark.parametrize("where", ["/proc/x.gif", "folder.gif", "file/x.gif"])
+def test_a_gif_that_cannot_be_written_is_refused_before_playing(
+    where: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """Each failed only once every episode had been played, and no score was printed."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    (tmp_path / "folder.gif").mkdir()
+    (tmp_path / "file").write_text("a file")
+    gif = Path(where) if where.startswith("/") else tmp_path / where
+    assert M.main(["--episodes", "400", "--gif", str(gif)]) == 2
+    err = capsys.readouterr().err
+    said = {
+        "/proc/x.gif": "--gif /proc/x.gif: cannot write into /proc",
+        "folder.gif": f"--gif {gif} is a folder; name a file to write",
+        "file/x.gif": f"--gif {gif}: {tmp_path / 'file'} is a file, not a folder",
+    }[where]
+    assert said in err
+    assert "replaced if it exists" in " ".join(M.build_parser().format_help().split())
+
+
+def test_a_record_dir_that_cannot_be_created_is_refused_before_playing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    (tmp_path / "file").write_text("a file")
+    with pytest.raises(InvalidOptionError, match=r"--record .*file is a file, not a folder"):
+        M.play("easy", "easy", 2, 0, record=tmp_path / "file" / "rec")
+
+
 def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
     with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
         M.play("easy", "nowhere.pt", 1, 0)

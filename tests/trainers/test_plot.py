@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -99,3 +101,69 @@ def test_paper_labels_close_together_do_not_overlap() -> None:
     # 0.93 and 0.89 are closer than a label is tall: the lower one goes under its line.
     assert offsets == {"VDN": 3, "QMIX": -9, "IQL": 3}
     assert sorted(line.get_ydata()[0] for line in ax.lines) == [0.75, 0.89, 0.93]
+
+
+@pytest.mark.parametrize(
+    ("defect", "said"),
+    [
+        ("config.json a list", "config.json is not a run's configuration: a JSON list"),
+        ("config.json not UTF-8", "config.json is unreadable: 'utf-8' codec can't decode"),
+        ("train.csv not UTF-8", "train.csv is not a records CSV"),
+        ("train.csv of other columns", "train.csv lacks the column(s) ['episodes', 'env_steps'"),
+        ("eval.csv header of other columns", "eval.csv lacks the column(s) ['win_rate'"),
+    ],
+)
+def test_a_malformed_run_is_refused_naming_its_file(
+    defect: str, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """AttributeError and UnicodeDecodeError tracebacks, or 'no rows ... yet' for a file of
+    the wrong columns."""
+    run = make_run(tmp_path, 1)
+    if defect == "config.json a list":
+        (run / "config.json").write_text("[1, 2]")
+    elif defect == "config.json not UTF-8":
+        (run / "config.json").write_bytes(b'{"alg": "\xff"}')
+    elif defect == "train.csv not UTF-8":
+        (run / "train.csv").write_bytes(b"episodes,env_steps\n\xff,1\n")
+    elif defect == "train.csv of other columns":
+        (run / "train.csv").write_text("a,b\n1,2\n")
+    else:
+        (run / "eval.csv").write_text("episodes,env_steps,mean_return\n")
+    out = tmp_path / "x.png"
+    assert P.main([str(run), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{run}/{said}" in err
+    assert not out.exists()
+
+
+def test_a_run_named_twice_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``neuronsmae-plot r r`` drew one run as two ("2 runs"), skewing mean and spread."""
+    run = make_run(tmp_path / "runs", 1)
+    make_run(tmp_path / "runs", 2)
+    out = tmp_path / "x.png"
+    for argv in ([str(run), str(run)], [str(run), str(tmp_path / "runs")],
+                 [str(run), str(tmp_path / "runs" / ".." / "runs" / run.name)]):  # fmt: skip
+        assert P.main([*argv, "--out", str(out)]) == 2
+        assert f"run {run} is named twice" in capsys.readouterr().err
+    assert not out.exists()
+    assert P.main([str(tmp_path / "runs"), "--out", str(out)]) == 0
+    assert "(2 runs)" in capsys.readouterr().out
+
+
+def test_an_out_whose_folder_is_a_file_is_refused_naming_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It printed "[Errno 17] File exists" without saying which path."""
+    run = make_run(tmp_path, 1)
+    (tmp_path / "keep.gif").write_bytes(b"GIF89a")
+    out = tmp_path / "keep.gif" / "x.png"
+    with pytest.raises(SystemExit) as exc:
+        P.main([str(run), "--out", str(out)])
+    assert exc.value.code == 2
+    assert f"--out {out}: {tmp_path / 'keep.gif'} is a file, not a folder" in (
+        capsys.readouterr().err
+    )
+    assert (tmp_path / "keep.gif").read_bytes() == b"GIF89a"
+    shown = subprocess.run([sys.executable, "-m", "neuronsmae.trainers.plot", "--help"],
+                           capture_output=True, text=True, check=True, timeout=120)  # fmt: skip
+    assert "replaced if it exists" in " ".join(shown.stdout.split())

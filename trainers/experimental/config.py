@@ -17,8 +17,8 @@ class ExperimentalConfig:
     trainers/experimental/starts.py. The agents lose mostly the starts they already judge
     bad, and uniform seeds give those starts only their small share of the data. Measured
     against the easy bot in 30 minutes on 2 cores with 0.3: test win rates 0.955, 0.92 and
-    0.935 on seeds 1-3 where the defaults read 0.91, 0.905 and 0.93 (``python
-    bench/bench_learning.py --set start_replay=0.3 --seed 2``); it learns sooner more than
+    0.935 on seeds 1-3 where the defaults read 0.91, 0.905 and 0.93 (``python -m
+    bench.bench_learning --set start_replay=0.3 --seed 2``); it learns sooner more than
     it learns better (validation from 9,000 episodes on averages 0.915 against 0.923)."""
     start_replay_plays: int = 3
     """A lost start is played at most this many times in all (≥ 2), so unwinnable starts
