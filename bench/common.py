@@ -17,6 +17,7 @@ import os
 import platform
 import socket
 import statistics
+import subprocess
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -132,6 +133,21 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def commit() -> str:
+    """The benchmarked code's commit: ``$NEURONSMAE_COMMIT`` (set for a ``git archive``
+    snapshot, which has no history) or the HEAD of the checkout this file is in, wherever
+    the command runs from; ``unknown`` outside any."""
+    if os.environ.get("NEURONSMAE_COMMIT"):
+        return os.environ["NEURONSMAE_COMMIT"]
+    try:
+        here = Path(__file__).resolve().parent
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                             check=True, timeout=10, cwd=here)  # fmt: skip
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
 
 
 def machine() -> dict[str, Any]:

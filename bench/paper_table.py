@@ -42,7 +42,6 @@ import os
 import platform
 import shutil
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Sequence
@@ -51,7 +50,7 @@ from typing import Any
 
 from scipy import stats
 
-from bench.common import at_least, non_negative
+from bench.common import at_least, commit, non_negative
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import (
     ConfigError,
@@ -73,19 +72,6 @@ TEST_FIELDS = ("win_rate", "draw_rate", "loss_rate", "mean_return")
 
 DEFAULTS_TESTS = {"eval.extra_test_contexts": "coef=1.5"}
 """The project's learner is tested at coef 1.5 too, beside the paper preset's runs."""
-
-
-def commit() -> str:
-    """The code's commit: ``$NEURONSMAE_COMMIT`` (set for a snapshot) or git's HEAD."""
-    if os.environ.get("NEURONSMAE_COMMIT"):
-        return os.environ["NEURONSMAE_COMMIT"]
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, timeout=10
-        )
-        return out.stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def cell_config(

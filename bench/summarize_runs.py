@@ -17,14 +17,12 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from bench.common import add_out, machine, out_problem, table, write_out
+from bench.common import add_out, commit, machine, out_problem, table, write_out
 
 CONFIG_KEYS = ("alg", "level", "seed", "workers", "env", "envs_per_worker", "max_minutes",
                "opponent", "preset", "contexts", "arena", "selfplay")  # fmt: skip
@@ -60,11 +58,6 @@ def _number(path: Path, rows: list[dict[str, str]], row: dict[str, str], column:
         raise ValueError(
             f"{path} line {line}, column {column!r}: expected a number, got {row[column]!r}"
         ) from None
-
-
-def _head() -> str:
-    done = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True)
-    return done.stdout.strip()
 
 
 def summarize(name: str, run_dir: Path) -> dict[str, Any]:
@@ -145,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     print(table(rows, ["run", "episodes", "env steps", "final", "best-validated"]))
     payload = {
         "what": args.note,
-        "commit": os.environ.get("NEURONSMAE_COMMIT") or _head(),
+        "commit": commit(),
         "machine": machine(),
         "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "runs": runs,

@@ -8,6 +8,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import psutil
 import pytest
@@ -142,3 +143,16 @@ def test_a_parser_refuses_a_bad_list_item_naming_the_argument(
     with pytest.raises(SystemExit):
         parser.parse_args(["--seconds", "0"])
     assert "argument --seconds: must be a finite number above 0, got 0.0" in capsys.readouterr().err
+
+
+def test_the_commit_is_the_checkout_s_wherever_the_command_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bench.common import commit
+
+    monkeypatch.delenv("NEURONSMAE_COMMIT", raising=False)
+    here = commit()
+    monkeypatch.chdir(tmp_path)  # outside any checkout: was "" or "unknown"
+    assert commit() == here and len(here) == 40
+    monkeypatch.setenv("NEURONSMAE_COMMIT", "abc123")  # a git-archive snapshot
+    assert commit() == "abc123"
