@@ -242,7 +242,13 @@ class EvalConfig:
         try:
             main = ContextSpec.parse(self.eval_contexts)
             out = {"main": main}
-            for text in filter(None, (t.strip() for t in self.extra_test_contexts.split("|"))):
+            extra = self.extra_test_contexts
+            for text in [t.strip() for t in extra.split("|")] if extra.strip() else []:
+                if not text or text in out:
+                    raise ConfigError(
+                        f"extra_test_contexts {extra!r}: every '|'-separated set must be "
+                        f"given once and not be empty, got {text!r}"
+                    )
                 out[text] = main.updated(ContextSpec.parse(text))
         except ContextSpecError as err:
             raise ConfigError(str(err)) from None

@@ -83,8 +83,13 @@ def parse_opponents(text: str) -> tuple[list[Member], bool]:
     """``"easy,runs/a/best.pt,self"`` → the fixed members and whether ``self`` is in it."""
     fixed: list[Member] = []
     self_play = False
-    for entry in filter(None, (part.strip() for part in text.split(","))):
+    entries = [part.strip() for part in text.split(",")] if text.strip() else []
+    if "" in entries:
+        raise ConfigError(f"opponent {text!r} has an empty entry between its commas")
+    for entry in entries:
         if entry == SELF:
+            if self_play:
+                raise ConfigError(f"opponent {text!r} names a member twice ({SELF!r})")
             self_play = True
         elif entry in LEVEL_ARGS:
             fixed.append(Member(f"bot:{entry}"))

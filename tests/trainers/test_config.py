@@ -374,6 +374,8 @@ def test_the_paper_preset_keeps_the_papers_ratios_at_any_worker_count(workers: i
         ({"contexts": "coef=big"}, "not a number"),
         ({"eval.eval_contexts": "coef=0.5,1"}, "must be fixed"),
         ({"eval.extra_test_contexts": "coef=1|coef=0..1"}, "must be fixed"),
+        ({"eval.extra_test_contexts": "coef=1.5|coef=1.5"}, "given once"),  # collapsed to one
+        ({"eval.extra_test_contexts": "||"}, "not be empty"),
         ({"level": "2"}, "level='2' is not valid"),
         ({"iteration_episodes": -1}, "iteration_episodes"),
     ],

@@ -32,6 +32,9 @@ def test_entries_are_bots_checkpoints_and_self(tmp_path: Path) -> None:
     [
         ("expert", r"opponent entry 'expert' is neither a bot level \(0, 1, easy"),
         ("easy,easy", "names a member twice"),
+        ("self,self", r"names a member twice \('self'\)"),  # was taken
+        (",", "empty entry"),  # an empty pool, as if no --opponent were given
+        ("easy,,hard", "empty entry"),
         ("runs/none.pt", "existing checkpoint"),
     ],
 )
