@@ -34,6 +34,7 @@ from neuronsmae.trainers.config import (
     make_config,
     parse_overrides,
 )
+from neuronsmae.trainers.interrupt import TrainingInterrupted
 from neuronsmae.trainers.mixers import ALGORITHMS
 from neuronsmae.trainers.outputs import check_folder
 from neuronsmae.trainers.records import RunExistsError, check_new_run_dir
@@ -148,7 +149,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench.bench_learning: error: {exc}", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    result = train(cfg)
+    try:
+        result = train(cfg)
+    except TrainingInterrupted as stop:  # Ctrl-C: the run's checkpoint is saved, no report
+        print(f"bench.bench_learning: {stop} (neuronsmae-train); no report written",
+              file=sys.stderr)  # fmt: skip
+        return 130
     total = time.perf_counter() - start
     final, best = result["final"], result.get("best")
     print_table(result["evals"])

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from bench import bench_learning
+from neuronsmae.trainers.config import TrainConfig
+from neuronsmae.trainers.interrupt import TrainingInterrupted
 
 
 @pytest.fixture
@@ -63,19 +65,22 @@ def test_an_out_that_is_a_file_or_unwritable_is_refused_before_training(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]  # nothing left behind
 
 
-def test_a_good_setting_reaches_training_with_its_run_folder(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+def test_a_good_setting_reaches_training_and_a_stopped_run_writes_no_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     seen = {}
 
-    def stop(cfg: object) -> None:
+    def stop(cfg: TrainConfig) -> None:  # a Ctrl-C: the run saved its checkpoint
         seen["cfg"] = cfg
-        raise KeyboardInterrupt
+        raise TrainingInterrupted(cfg.run_dir, 12, "SIGINT")
 
     monkeypatch.setattr(bench_learning, "train", stop)
-    with pytest.raises(KeyboardInterrupt):
-        bench_learning.main(["--set", f"out={tmp_path / 'run'}", "--set", "lr=1e-3"])
+    out = tmp_path / "reports"
+    argv = ["--set", f"out={tmp_path / 'run'}", "--set", "lr=1e-3", "--out", str(out)]
+    assert bench_learning.main(argv) == 130
     assert seen["cfg"].out == str(tmp_path / "run") and seen["cfg"].learner.lr == 1e-3
+    assert "stopped at 12 episodes" in capsys.readouterr().err
+    assert not out.exists() or not list(out.iterdir())  # no report of a run cut short
 
 
 ROOT = Path(__file__).resolve().parents[2]
