@@ -175,6 +175,11 @@ class ArenaParallelEnv(Recipe, ParallelEnv[AgentID, Any, Any]):
         missing = [a for a in acting if a not in actions]
         if missing:
             raise InvalidActionError(f"no action for live agent(s) {missing}")
+        unknown = [a for a in actions if a not in self.possible_agents]
+        if unknown:  # a typo or another team's name: refused, not silently dropped
+            raise InvalidActionError(
+                f"actions name unknown agent(s) {unknown[:5]!r:.120}; the live agents are {acting}"
+            )
         layout = self.layout
         joint = [
             layout.to_arena(a, actions[a]) if a in acting else layout.noop()

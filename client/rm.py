@@ -14,6 +14,7 @@ import numpy as np
 
 from neuronsmae.client.connection import Connection
 from neuronsmae.client.connection import answering_pid as pid_on_link
+from neuronsmae.protocol.actions import check_sequence, is_sequence
 from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
@@ -21,7 +22,7 @@ from neuronsmae.protocol.errors import (
     ServerError,
     error_from_code,
 )
-from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings
+from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings, plain_contexts
 from neuronsmae.protocol.launch import ServerCommand, check_launch, check_timeout, ports_of
 from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import (
@@ -92,6 +93,8 @@ class RM(ArenaAPI):
         self.options = dict(options)
         self._cache: dict[str, Any] = {}
         """What the last reset/step left: obs, state, avail_actions (private copies)."""
+        self._known: dict[str, int] = {}
+        """What does not change while this client lives (``n_agents``)."""
         self._conn = Connection(
             port=port,
             command=lambda p: ServerCommand(
@@ -131,7 +134,7 @@ class RM(ArenaAPI):
     def reset(
         self, contexts: Mapping[str, Any] | None = None, seed: int | None = None
     ) -> list[np.ndarray]:
-        wire = None if contexts is None else dict(contexts)
+        wire = plain_contexts(contexts)
         self._cache.clear()
         reply = self._call(Reset(contexts=wire, seed=seed), InvalidContextError)
         obs = list(reply.value)
@@ -141,6 +144,8 @@ class RM(ArenaAPI):
     def step(
         self, actions: Sequence[Action]
     ) -> tuple[list[np.ndarray], list[float], bool, dict[str, Any]]:
+        if not is_sequence(actions):  # what list() would misread: refused as Arena does
+            check_sequence(actions, self._n_agents())
         wire = actions if isinstance(actions, np.ndarray) else list(actions)
         self._cache.clear()
         reply = self._call(Step(actions=wire), InvalidActionError)
@@ -149,6 +154,12 @@ class RM(ArenaAPI):
         obs, rewards, done, info = reply.value
         self._remember(obs, reply)
         return obs, rewards, done, info
+
+    def _n_agents(self) -> int:
+        """How many agents act (for messages), asked once."""
+        if "n_agents" not in self._known:
+            self._known["n_agents"] = int(self.get_env_info()["n_agents"])
+        return self._known["n_agents"]
 
     def get_obs(self) -> list[np.ndarray]:
         return self._read("obs")

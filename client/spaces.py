@@ -37,6 +37,7 @@ import numpy as np
 from gymnasium import spaces
 
 from neuronsmae.protocol import env_info
+from neuronsmae.protocol.actions import check_sequence, is_number
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
@@ -168,7 +169,9 @@ class Layout:
             if isinstance(action, np.ndarray) and action.shape == ():
                 return action.item()
             return action.item() if isinstance(action, np.generic) else action
-        arr = np.asarray(action, dtype=np.float64)
+        raw = np.asarray(action) if not isinstance(action, (list, tuple)) else None
+        numbers = raw.dtype.kind in "iuf" if raw is not None else all(map(is_number, action))
+        arr = np.asarray(action, dtype=np.float64) if numbers else np.full(4, np.nan)
         if arr.shape != (4,) or not np.isfinite(arr).all():
             raise InvalidActionError(
                 f"{agent}: a continuous action is 4 finite numbers (vx, vy, omega, target), "
@@ -226,12 +229,8 @@ def per_agent_actions(actions: Any, n_agents: int, discrete: bool = True) -> lis
     """One action per agent from a sequence of ``n_agents``; discrete ones as ``int()`` of
     each (Python or numpy integers, 0-d or one-element tensors). ``InvalidActionError``
     names what is wrong and which agent."""
-    try:
-        count = len(actions)
-    except TypeError:
-        raise InvalidActionError(
-            f"actions must be a sequence of {n_agents} (one per agent), got {actions!r:.80}"
-        ) from None
+    check_sequence(actions, n_agents)  # not a mapping, set, string, scalar (as the arena)
+    count = len(actions)
     if count != n_agents:
         raise InvalidActionError(f"expected {n_agents} actions (one per agent), got {count}")
     if not discrete:
@@ -249,7 +248,7 @@ def _discrete_action(agent: int, action: Any) -> int:
         raise InvalidActionError(
             f"agent {agent}: an action is an integer (anything int() accepts), got {action!r:.80}"
         ) from exc
-    if isinstance(value, bool) or (isinstance(value, float) and value != whole):
+    if isinstance(value, (bool, str, bytes)) or (isinstance(value, float) and value != whole):
         raise InvalidActionError(
             f"agent {agent}: an action is an integer (a whole number), got {action!r:.80}"
         )

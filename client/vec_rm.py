@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.client.connection import Call, Connection
-from neuronsmae.client.spaces import MOTION_HIGH
+from neuronsmae.protocol.actions import check_joint, used_agents
 from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
@@ -37,14 +37,18 @@ from neuronsmae.protocol.errors import (
 from neuronsmae.protocol.interface import (
     StepHandle,
     VecArenaAPI,
+    check_seeds,
+    count_option,
+    first_seed,
     inherit_docstrings,
     per_arena,
+    plain_contexts,
+    seeds_per_arena,
     shares_of,
 )
 from neuronsmae.protocol.launch import ServerCommand, check_launch, ports_of
 from neuronsmae.protocol.messages import (
     MAX_ARENAS,
-    MAX_SEED,
     Configure,
     Contexts,
     OkReply,
@@ -70,6 +74,16 @@ class VecRM(VecArenaAPI):
     ``host``, ``timeout``, ``router``, ``time_scale`` and ``busy_poll_us`` are ``RM``'s,
     except that ``time_scale`` defaults to 0 (unpaced): a vector client is there for
     throughput; ``no_graphics``, as in ``RM``, changes nothing (servers are headless).
+    ``seed`` must be an integer: unlike ``RM(seed=None)``, which keeps a server's own
+    ``--seed``, a vector seeds arena i ``seed + i`` across its servers, which servers' own
+    seeds cannot give (``InvalidOptionError``, as ``VecArena(seed=None)``).
+
+    ``step`` checks the rows of the arenas that step in the call only, whatever the number
+    of servers: an inactive or autoresetting arena's row is ignored, and so are the actions
+    of a bot-driven team (``bot_team``); every ``seeds`` and ``contexts`` entry is checked.
+    Over several servers the checks run here before anything is sent, so this client
+    remembers which arenas have ended their episodes (gathering a step still in flight
+    that touches an arena of the new step first).
     """
 
     def __init__(
@@ -88,16 +102,12 @@ class VecRM(VecArenaAPI):
         busy_poll_us: float = 0.0,
         **options: Any,
     ) -> None:
-        check_launch(time_scale, busy_poll_us, seed=seed)
+        check_launch(time_scale, busy_poll_us)
         ports = ports_of(port)
         count = len(ports) if ports is not None else servers
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise InvalidOptionError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= num_envs:
-            raise InvalidOptionError(
-                f"servers must be an integer in [1, num_envs={num_envs}], got {count!r}"
-            )
-        self.num_envs, self.seed, self.options = num_envs, int(seed), dict(options)
+        num_envs = count_option("num_envs", num_envs, 1)
+        count = count_option("servers", count, 1, num_envs)
+        self.num_envs, self.seed, self.options = num_envs, first_seed(seed, num_envs), dict(options)
         self.shares = shares_of(num_envs, count)
         if max(self.shares) > MAX_ARENAS:
             need = math.ceil(num_envs / MAX_ARENAS)
@@ -109,6 +119,16 @@ class VecRM(VecArenaAPI):
         self._conns: list[Connection] = []
         self._cache: dict[str, np.ndarray] = {}
         self._started = False
+        # What a request to several servers is checked against (see ``_stepping``):
+        self._done = np.ones(num_envs, dtype=bool)
+        """Whose episode ended at its last gathered step: the next step resets it."""
+        self._contexts: list[dict[str, Any] | None] = [None] * num_envs
+        """The contexts each arena was last reset with (its ``bot_team`` says whose
+        actions it ignores)."""
+        self._pending: list[_PendingStep] = []
+        """Steps sent to several servers whose replies are not gathered yet."""
+        self._epoch = 0
+        """Counts resets: a step sent before the last reset no longer says who is done."""
         try:
             for j in range(count):
                 self._conns.append(
@@ -157,14 +177,14 @@ class VecRM(VecArenaAPI):
     ) -> np.ndarray:
         seeds = self._seeds(seed)
         if contexts is None or isinstance(contexts, Mapping):
-            per_server: list[Any] = [None if contexts is None else dict(contexts)] * len(
-                self._conns
-            )
-            self._check_contexts([contexts])
+            one = plain_contexts(contexts)
+            per_arena = [one] * self.num_envs
+            per_server: list[Any] = [one] * len(self._conns)
         else:
-            per_arena = self._entries("contexts", contexts, InvalidContextError)
-            self._check_contexts(per_arena)
-            per_server = self._split([None if c is None else dict(c) for c in per_arena])
+            entries = self._entries("contexts", contexts, InvalidContextError)
+            per_arena = [plain_contexts(c, f"arena {i}: ") for i, c in enumerate(entries)]
+            per_server = self._split(per_arena)
+        self._check_contexts(per_arena)
         seed_parts = self._split(seeds) if seeds is not None else [None] * len(self._conns)
         calls = [
             conn.send(VReset(contexts=c, seeds=s), InvalidContextError)
@@ -172,6 +192,10 @@ class VecRM(VecArenaAPI):
         ]
         self._gather(calls)
         self._started = True
+        self._epoch += 1
+        self._pending = []
+        self._done[:] = False
+        self._contexts = list(per_arena)
         return self._obs_copy()
 
     def step(
@@ -195,15 +219,18 @@ class VecRM(VecArenaAPI):
         if not self._started:
             raise ResetNeededError("step() called before reset(): call reset() first")
         rows = self._rows(actions)
-        seed_list = None if seeds is None else self._entries("seeds", seeds, InvalidContextError)
-        if seed_list is not None:
-            self._check_seeds(seed_list)
+        seed_list = None if seeds is None else check_seeds(seeds, self.num_envs)
         ctx_list = None
         if contexts is not None:
-            ctx_list = [None if c is None else dict(c) for c in self._entries(
-                "contexts", contexts, InvalidContextError)]  # fmt: skip
+            ctx_list = [
+                plain_contexts(c, f"arena {i}: ")
+                for i, c in enumerate(self._entries("contexts", contexts, InvalidContextError))
+            ]
             self._check_contexts(ctx_list)
         flags = None if active is None else self._flags(active)
+        on = np.ones(self.num_envs, dtype=bool) if flags is None else np.array(flags)
+        if len(self._conns) > 1:
+            self._check_rows(rows, on, ctx_list)
         n = len(self._conns)
         calls: list[Call | dict[str, Any]] = [
             self._idle_reply(j)
@@ -226,7 +253,10 @@ class VecRM(VecArenaAPI):
                 strict=True,
             ))
         ]  # fmt: skip
-        return _PendingStep(self, calls)
+        handle = _PendingStep(self, calls, on)
+        if len(self._conns) > 1:
+            self._pending.append(handle)
+        return handle
 
     def get_obs(self) -> np.ndarray:
         return self._read("obs")
@@ -288,24 +318,8 @@ class VecRM(VecArenaAPI):
         return per_arena(name, values, self.num_envs, error)
 
     def _seeds(self, seed: Any) -> list[int | None] | None:
-        if seed is None:
-            return None
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
-            seeds: list[int | None] = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = self._entries("seed", seed, InvalidContextError)
-        self._check_seeds(seeds)
-        return [None if s is None else int(s) for s in seeds]
-
-    def _check_seeds(self, seeds: Sequence[Any]) -> None:
-        for i, s in enumerate(seeds):
-            if s is None:
-                continue
-            ok = isinstance(s, (int, np.integer)) and not isinstance(s, (bool, np.bool_))
-            if not ok or not 0 <= int(s) <= MAX_SEED:
-                raise InvalidContextError(
-                    f"arena {i}: seed must be an integer in [0, {MAX_SEED}], got {s!r}"
-                )
+        seeds = seeds_per_arena(seed, self.num_envs)
+        return None if all(s is None for s in seeds) else seeds
 
     def _rows(self, actions: Any) -> Any:
         if isinstance(actions, np.ndarray):
@@ -317,9 +331,32 @@ class VecRM(VecArenaAPI):
             rows = actions
         else:
             rows = self._entries("actions", actions, InvalidActionError)
-        if len(self._conns) > 1:
-            check_action_rows(rows, self._info, bool(self.options.get("clip_actions")))
         return rows
+
+    def _check_rows(
+        self, rows: Any, on: np.ndarray, ctx_list: Sequence[dict[str, Any] | None] | None
+    ) -> None:
+        """Refuse, before anything is sent to several servers, a row that its server would
+        refuse: the rows of the arenas that step in this call, without the actions of a
+        team a bot drives (what the servers check; the other rows are ignored there)."""
+        self._settle(on)
+        resetting = on & self._done
+        used: dict[int, list[bool] | None] = {}
+        mode, agents = self._info.get("mode", ""), list(self._info.get("agents", []))
+        for i in np.flatnonzero(on & ~self._done).tolist():
+            bot_team = (self._contexts[i] or {}).get("bot_team", "none")
+            used[i] = used_agents(agents, mode, bot_team)
+        check_action_rows(rows, self._info, bool(self.options.get("clip_actions")), used)
+        for i in np.flatnonzero(resetting).tolist():  # what these arenas reset with
+            if ctx_list is not None and ctx_list[i]:
+                self._contexts[i] = ctx_list[i]
+
+    def _settle(self, on: np.ndarray) -> None:
+        """Gather the steps in flight that touch arenas of ``on`` (and those sent before
+        them, in order), so that whose episode has ended is known for every such arena."""
+        last = max((n for n, h in enumerate(self._pending) if (h.on & on).any()), default=-1)
+        for handle in list(self._pending[: last + 1]):
+            handle.result()
 
     def _flags(self, active: Sequence[bool] | np.ndarray) -> list[bool]:
         flags = np.asarray(active)
@@ -342,17 +379,36 @@ class VecRM(VecArenaAPI):
 class _PendingStep(StepHandle):
     """A ``vstep`` sent to every server; :meth:`result` gathers and stacks the replies."""
 
-    def __init__(self, vec: VecRM, calls: list[Call | dict[str, Any]]) -> None:
+    def __init__(self, vec: VecRM, calls: list[Call | dict[str, Any]], on: np.ndarray) -> None:
         super().__init__(None)
         self._vec, self._calls = vec, calls
+        self.on = on
+        """The arenas this step touches (its ``active``)."""
+        self._epoch = vec._epoch
+        self._error: BaseException | None = None
 
     def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        if self._error is not None:
+            raise self._error
         if self._calls:  # the first call gathers the replies; later ones repeat them
-            values = self._vec._gather(self._calls)
+            vec = self._vec
+            try:
+                values = vec._gather(self._calls)
+            except BaseException as exc:
+                self._error, self._calls = exc, []
+                self._forget()
+                raise
             rewards, dones = _stacked(values, "rewards"), _stacked(values, "dones")
             infos = [info for v in values for info in v["infos"]]
-            self._value, self._calls = (self._vec._obs_copy(), rewards, dones, infos), []
+            self._value, self._calls = (vec._obs_copy(), rewards, dones, infos), []
+            if self._epoch == vec._epoch:
+                vec._done[self.on] = dones[self.on]
+            self._forget()
         return self._value
+
+    def _forget(self) -> None:
+        if self in self._vec._pending:
+            self._vec._pending.remove(self)
 
 
 def _stacked(values: list[dict[str, Any]], key: str) -> np.ndarray:
@@ -361,46 +417,35 @@ def _stacked(values: list[dict[str, Any]], key: str) -> np.ndarray:
     return values[0][key] if len(values) == 1 else np.concatenate([v[key] for v in values])
 
 
-def check_action_rows(rows: Any, info: Mapping[str, Any], clip: bool = False) -> None:
-    """Refuse what an arena would refuse: wrong counts, non-integers and out-of-range indices
-    (abstract, discrete), or non-finite and out-of-bound motions (continuous, unless the
-    arenas clip). ``InvalidActionError`` names the arena and agent."""
+def check_action_rows(
+    rows: Any,
+    info: Mapping[str, Any],
+    clip: bool = False,
+    used: Mapping[int, Sequence[bool] | None] | None = None,
+) -> None:
+    """Refuse what an arena would refuse (the shared
+    :func:`~neuronsmae.protocol.actions.check_joint`): ``InvalidActionError`` names the
+    arena and agent. ``used`` maps each arena whose row is checked to whose actions it uses
+    (None: every agent's); None checks every row, all agents."""
     n_agents, n_actions = int(info["n_agents"]), int(info["n_actions"])
-    continuous = info["action_space"] == "continuous"
+    space = str(info["action_space"])
+    checked = range(len(rows)) if used is None else sorted(used)
+    masks: Mapping[int, Sequence[bool] | None] = used or {}
     if (
-        not continuous
+        space != "continuous"
         and isinstance(rows, np.ndarray)
         and rows.dtype.kind in "iu"
         and rows.shape == (len(rows), n_agents)
-        and not ((rows < 0) | (rows >= n_actions)).any()
     ):
-        return  # every row valid, checked at once (a sampler's step); else find the culprit
-    for i, row in enumerate(rows):
+        part = rows[list(checked)]
+        if not ((part < 0) | (part >= n_actions)).any():
+            return  # every row valid, checked at once (a sampler's step); else find the culprit
+    n_enemy = int(info.get("n_enemies", n_actions))
+    for i in checked:
         try:
-            arr = np.asarray(row, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidActionError(
-                f"arena {i}: actions must be numbers, got {row!r:.80}"
-            ) from None
-        want = (n_agents, 4) if continuous else (n_agents,)
-        if arr.shape != want:
-            raise InvalidActionError(
-                f"arena {i}: expected actions of shape {want} (one per agent), got {arr.shape}"
-            )
-        targets = arr[:, 3] if continuous else arr
-        bad = ~(np.isfinite(targets) & (targets == np.round(targets)))
-        bad |= (targets < 0) | (targets >= n_actions)
-        if continuous and not clip:
-            bound = MOTION_HIGH.astype(np.float64)
-            bad |= ~np.isfinite(arr[:, :3]).all(axis=1) | (np.abs(arr[:, :3]) > bound).any(axis=1)
-        if bad.any():
-            agent = int(np.flatnonzero(bad)[0])
-            raise InvalidActionError(
-                f"arena {i}: agent {agent}: action {np.asarray(row)[agent].tolist()!r} is out of "
-                "range; valid: "
-                + ("(vx, vy, omega within bounds, target in [0, "
-                   f"{n_actions - 1}])" if continuous else f"[0, {n_actions - 1}]")
-            )  # fmt: skip
+            check_joint(rows[i], n_agents, space, n_actions, n_enemy, clip, masks.get(i))
+        except InvalidActionError as exc:
+            raise InvalidActionError(f"arena {i}: {exc}") from None
 
 
 def check_contexts(contexts: Mapping[str, Any], table: list[dict[str, Any]], where: str) -> None:
@@ -410,11 +455,14 @@ def check_contexts(contexts: Mapping[str, Any], table: list[dict[str, Any]], whe
     for key, value in contexts.items():
         row = rows.get(key)
         if row is None:
-            raise InvalidContextError(f"{where}unknown context key {key!r}; valid: {sorted(rows)}")
+            raise InvalidContextError(
+                f"{where}unknown context key {key!r:.80}; valid: {sorted(rows)}"
+            )
         if "choices" in row:
             if isinstance(value, bool) or value not in row["choices"]:
                 raise InvalidContextError(
-                    f"{where}context {key!r}={value!r} is not valid; choose one of {row['choices']}"
+                    f"{where}context {key!r}={value!r:.80} is not valid; "
+                    f"choose one of {row['choices']}"
                 )
             continue
         number = isinstance(value, (int, float)) and not isinstance(value, bool)

@@ -9,6 +9,8 @@ only care that the input was wrong.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 
 class NeuronsMAEError(Exception):
     """Base class of every error NeuronsMAE raises on purpose."""
@@ -93,6 +95,16 @@ ERRORS: dict[str, type[NeuronsMAEError]] = {
         ServerError,
     )
 }
+
+
+def listed(items: Iterable[object], limit: int = 8, width: int = 40) -> str:
+    """``items`` for an error message, bounded however many (or long) they are: the first
+    ``limit`` reprs, each cut to ``width`` characters, and how many more there are; so an
+    error reply never echoes a whole oversized request."""
+    items = list(items)
+    shown = ", ".join(f"{item!r:.{width}}" for item in items[:limit])
+    more = f", ... ({len(items) - limit} more, {len(items)} in all)" if len(items) > limit else ""
+    return f"[{shown}{more}]"
 
 
 def error_from_code(code: str, message: str) -> NeuronsMAEError:

@@ -14,12 +14,17 @@ methods below are indexed by that order.
 from __future__ import annotations
 
 import abc
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, Sequence, Set
 from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import InvalidContextError
+from neuronsmae.protocol.errors import (
+    InvalidContextError,
+    InvalidOptionError,
+    NeuronsMAEError,
+)
+from neuronsmae.protocol.messages import MAX_SEED
 
 Action = Any
 """One agent's action: an ``int`` (abstract, discrete) or 4 floats ``(vx, vy, omega, target)``."""
@@ -127,7 +132,8 @@ def per_arena(
     """``values`` as a list of one entry per arena (the vector calls' rule for ``seeds``,
     ``contexts`` and action rows); ``error`` (naming ``name``) when it is not a sequence of
     ``num_envs`` entries."""
-    if isinstance(values, (str, bytes, Mapping)) or not hasattr(values, "__len__"):
+    unordered = isinstance(values, (str, bytes, bytearray, Mapping, Set))
+    if unordered or not hasattr(values, "__len__") or np.ndim(values) == 0:
         raise error(
             f"{name} must be a sequence of {num_envs} entries (one per arena, or None), "
             f"got {values!r:.80}"
@@ -135,6 +141,91 @@ def per_arena(
     if len(values) != num_envs:
         raise error(f"{name} must have {num_envs} entries (one per arena), got {len(values)}")
     return list(values)
+
+
+def _is_int(value: Any) -> bool:
+    """An integer (Python or NumPy) that is not a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def count_option(name: str, value: Any, lo: int, hi: int | None = None) -> int:
+    """An integer option such as ``num_envs`` (Python or NumPy integer, never a bool) as an
+    int in ``[lo, hi]`` (no upper bound when ``hi`` is None), or ``InvalidOptionError``
+    naming it and what is valid."""
+    valid = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
+    if not _is_int(value) or not lo <= int(value) <= (hi if hi is not None else int(value)):
+        raise InvalidOptionError(f"{name} must be an integer {valid}, got {value!r:.80}")
+    return int(value)
+
+
+def first_seed(seed: Any, num_envs: int) -> int:
+    """A vector's ``seed`` option as an int: arena i is seeded ``seed + i``, so the seed is
+    an integer in [0, MAX_SEED - (num_envs - 1)]. None is refused, as ``Arena(seed=None)``
+    is: ``RM(seed=None)`` keeps a server's own ``--seed``, which cannot give the arenas of
+    several servers consecutive seeds. ``InvalidOptionError`` otherwise."""
+    top = MAX_SEED - (num_envs - 1)
+    if not _is_int(seed) or not 0 <= int(seed) <= top:
+        raise InvalidOptionError(
+            f"seed must be an integer in [0, {top}] (arena i is seeded seed + i), got {seed!r:.80}"
+        )
+    return int(seed)
+
+
+def seed_value(
+    seed: Any, where: str = "", error: type[NeuronsMAEError] = InvalidContextError
+) -> int:
+    """One reset seed as an int in [0, MAX_SEED] (Python or NumPy integer, never a bool),
+    or ``error`` (its message starting with ``where``) saying what is valid."""
+    if not _is_int(seed):
+        raise error(f"{where}seed must be an integer in [0, {MAX_SEED}], got {seed!r:.80}")
+    if not 0 <= int(seed) <= MAX_SEED:
+        raise error(f"{where}seed {int(seed)} is out of range; valid: [0, {MAX_SEED}]")
+    return int(seed)
+
+
+def seeds_per_arena(seed: Any, num_envs: int) -> list[int | None]:
+    """A vector ``reset``'s ``seed`` as one seed (or None) per arena: None (every arena
+    continues its RNG), an int (arena i gets ``seed + i``) or a sequence of ``num_envs``
+    ints or None. ``InvalidContextError`` names the arena and what is valid."""
+    if seed is None:
+        return [None] * num_envs
+    if _is_int(seed):
+        first = seed_value(seed)
+        if first > MAX_SEED - (num_envs - 1):
+            raise InvalidContextError(
+                f"seed must be in [0, {MAX_SEED - (num_envs - 1)}] (arena i gets seed + i), "
+                f"got {first}"
+            )
+        return [first + i for i in range(num_envs)]
+    if isinstance(seed, (str, bytes, bytearray, Mapping, Set)) or np.ndim(seed) == 0:
+        raise InvalidContextError(
+            f"seed must be an int (arena i gets seed + i) or a sequence of {num_envs} ints "
+            f"or None (one per arena), got {type(seed).__name__} {seed!r:.80}"
+        )
+    return check_seeds(seed, num_envs, "seed")
+
+
+def check_seeds(seeds: Any, num_envs: int, name: str = "seeds") -> list[int | None]:
+    """``seeds`` of a vector ``step`` (or a ``reset``'s list): one int or None per arena,
+    each checked (:func:`seed_value`) whether or not that arena resets in this call."""
+    entries = per_arena(name, seeds, num_envs)
+    return [None if s is None else seed_value(s, f"arena {i}: ") for i, s in enumerate(entries)]
+
+
+def plain_contexts(contexts: Any, where: str = "") -> dict[str, Any] | None:
+    """A reset's ``contexts`` (a mapping of context key to value, or None) as a plain dict
+    whose NumPy scalars are Python values (``np.float32(0.2)`` → ``0.2``, ``np.bool_`` →
+    ``bool``, refused later as a bool is), so that they are checked, stored and sent as
+    the numbers they are. ``InvalidContextError`` (its message starting with ``where``)
+    when ``contexts`` is not a mapping."""
+    if contexts is None:
+        return None
+    if not isinstance(contexts, Mapping):
+        raise InvalidContextError(
+            f"{where}contexts must be a mapping of context key to value (or None), got "
+            f"{type(contexts).__name__} {contexts!r:.80}"
+        )
+    return {k: v.item() if isinstance(v, np.generic) else v for k, v in contexts.items()}
 
 
 def shares_of(num_envs: int, parts: int) -> list[int]:
@@ -185,10 +276,11 @@ class VecArenaAPI(abc.ABC):
     ) -> np.ndarray:
         """Reset every arena; return ``obs [K, n_agents, obs_dim]``.
 
-        ``contexts`` is one mapping for all arenas or one (or None) per arena; ``seed`` an
-        int (arena i gets ``seed + i``, as Gymnasium's vector environments do) or one seed
-        (or None) per arena. Raises ``InvalidContextError`` naming the arena and the key;
-        a refused reset changes no arena.
+        ``contexts`` is one mapping for all arenas or one (or None) per arena; ``seed`` None
+        (every arena continues its RNG), an int (arena i gets ``seed + i``, as Gymnasium's
+        vector environments do) or one seed (or None) per arena. Raises
+        ``InvalidContextError`` naming the arena and the key; a refused reset changes no
+        arena.
         """
 
     @abc.abstractmethod
@@ -209,6 +301,13 @@ class VecArenaAPI(abc.ABC):
         reset, reward 0, ``done`` False, empty info. Raises ``InvalidActionError`` naming
         the arena and agent, ``InvalidContextError``, or ``ResetNeededError`` before the
         first :meth:`reset`; a refused request changes no arena.
+
+        What is checked, the same in process, on one server or on several: the action row
+        of every arena that steps in this call; the row of an arena that does not step (not
+        ``active``, or autoresetting) is ignored, unchecked, as Gymnasium's next-step
+        autoreset ignores the action after a done, and so are the actions of the team a bot
+        drives (``bot_team``). Every entry of ``seeds`` and ``contexts`` is checked whether or
+        not its arena resets in this call, so a typo is refused at once, not at the reset.
         """
 
     def step_async(

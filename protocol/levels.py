@@ -52,7 +52,7 @@ def level_error(field: str, value: Any) -> str:
     elif isinstance(value, (int, float)) and not isinstance(value, bool) and value == 2:
         hint = " (the released build had no level 2; the paper's hard bot is 'hard')"
     return (
-        f"{field}={value!r} is not valid{hint}; valid: the released build's levels "
+        f"{field}={value!r:.80} is not valid{hint}; valid: the released build's levels "
         f"{list(RELEASED_LEVELS)} as numbers, or a name: {list(LEVEL_NAMES)} "
         "(the paper's bots are 'easy', 'middle' and 'hard')"
     )

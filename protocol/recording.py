@@ -246,11 +246,12 @@ def write_recording(path: str | Path, recording: Recording) -> Path:
     return writer.path
 
 
-def _lines(path: Path) -> Iterator[tuple[int, dict[str, Any]]]:
-    """(line number, object) of each line; a truncated gzip tail ends the file quietly."""
+def _lines(path: Path, tail: dict[str, int] | None = None) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(line number, object) of each line; a truncated gzip tail ends the file quietly,
+    noted in ``tail`` (see :func:`_tolerant`)."""
     try:
         with gzip.open(path, "rb") as f:
-            for n, raw in enumerate(_tolerant(f), start=1):
+            for n, raw in enumerate(_tolerant(f, {} if tail is None else tail), start=1):
                 try:
                     obj = json.loads(raw)
                 except json.JSONDecodeError as exc:
@@ -262,13 +263,18 @@ def _lines(path: Path) -> Iterator[tuple[int, dict[str, Any]]]:
         raise RecordingFormatError(f"{path}: not a gzip file: {exc}") from exc
 
 
-def _tolerant(f: IO[bytes]) -> Iterator[bytes]:
-    """Complete lines of a gzip stream, stopping at a tail cut short by a crash."""
+def _tolerant(f: IO[bytes], tail: dict[str, int]) -> Iterator[bytes]:
+    """Complete lines of a gzip stream, stopping at a tail cut short by a crash. ``tail``
+    gets ``cut`` = 1 when the gzip stream ended early and ``partial`` = the bytes of an
+    unfinished last line, so a reader can tell a truncated file from an empty one."""
     try:
         for raw in f:
             if raw.endswith(b"\n"):
                 yield raw
+            else:
+                tail["partial"] = len(raw)
     except EOFError:
+        tail["cut"] = 1
         return
 
 
@@ -283,9 +289,22 @@ def read_recording(path: str | Path) -> Recording:
     path = Path(path)
     if not path.is_file():
         raise RecordingFormatError(f"{path}: no such recording")
-    lines = _lines(path)
+    tail: dict[str, int] = {}
+    lines = _lines(path, tail)
     first = next(lines, None)
     if first is None:
+        if tail:
+            raise RecordingFormatError(
+                f"{path}: truncated or corrupt: "
+                + ("the gzip stream ends early" if tail.get("cut") else "")
+                + (" and " if len(tail) == 2 else "")
+                + (
+                    f"the header line is cut short ({tail['partial']} bytes, no newline)"
+                    if "partial" in tail
+                    else ""
+                )
+                + "; no complete header line"
+            )
         raise RecordingFormatError(f"{path}: empty file")
     _, head = first
     if head.get("format") != FORMAT:

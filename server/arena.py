@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.actions import used_agents
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import ClosedError, InvalidOptionError, ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
@@ -101,6 +102,8 @@ class Arena(ArenaAPI):
         self.targets = np.zeros(self.n, dtype=np.int64)
         self.cmd = np.zeros((self.n, 3))
         self.bots: dict[int, Any] = {BLUE: None, RED: None}
+        self._used: list[bool] | None = None
+        """Whose actions this episode uses (None: every agent's); a bot's team's are not."""
 
     # --- construction helpers -----------------------------------------------------------
     def _mates(self, i: int) -> np.ndarray:
@@ -150,6 +153,7 @@ class Arena(ArenaAPI):
             else None,
         }
         self._wanted_mask = self._wanted()
+        self._used = used_agents([self.agent_name(i) for i in self.agents], cfg.mode, bot_team)
         self.t = 0
         self.done = False
         self._episodes += 1
@@ -265,8 +269,10 @@ class Arena(ArenaAPI):
     def check_actions(self, actions: Sequence[Any]) -> list[Any]:
         """Validate a joint action without stepping: the per-agent actions as ``step`` will
         use them, or ``InvalidActionError`` naming the agent and the bound. ``VecArena``
-        checks every arena's row this way before it steps any arena."""
-        return self.decoder.validate(actions, len(self.agents))
+        checks every arena's row this way before it steps any arena. In competitive mode
+        the actions of the team a bot drives this episode (``bot_team``) are ignored, so
+        they are not checked (only counted)."""
+        return self.decoder.validate(actions, len(self.agents), self._used)
 
     def _need_open(self, what: str) -> None:
         """After ``close()`` the simulation is gone: a typed error, not PyBullet's "Not

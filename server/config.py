@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.errors import InvalidOptionError, listed
 from neuronsmae.protocol.levels import level_error, level_value
 
 ACTION_SPACES = ("abstract", "discrete", "continuous")
@@ -80,7 +80,9 @@ class ArenaConfig:
     hit_mode: str = "expected"
     """"expected" damage per firing step, or "sampled" hits with that probability."""
     clip_actions: bool = False
-    """Clip out-of-range continuous commands instead of raising InvalidActionError."""
+    """Clip out-of-range continuous motion commands (vx, vy, omega) to their bounds instead
+    of raising InvalidActionError. The target is a choice, not a command: one that is not an
+    integer naming an enemy is refused either way."""
     planner_resolution: float = 0.04
     """Grid cell size of the abstract action planner (m)."""
 
@@ -95,7 +97,8 @@ class ArenaConfig:
         ):
             if getattr(self, name) not in choices:
                 raise InvalidOptionError(
-                    f"option {name}={getattr(self, name)!r} is not valid; choose one of {choices}"
+                    f"option {name}={getattr(self, name)!r:.80} is not valid; "
+                    f"choose one of {choices}"
                 )
         level = level_value(self.blue_level)
         if level is None:
@@ -146,7 +149,9 @@ class ArenaConfig:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(options) - names)
         if unknown:
-            raise InvalidOptionError(f"unknown option(s) {unknown}; valid options: {sorted(names)}")
+            raise InvalidOptionError(
+                f"unknown option(s) {listed(unknown)}; valid options: {sorted(names)}"
+            )
         return cls(**dict(options))
 
     def to_dict(self) -> dict[str, Any]:
@@ -162,7 +167,7 @@ def _check_int(cfg: ArenaConfig, name: str, lo: int, hi: int) -> None:
     """An integer option (NumPy's too, stored as a Python int) in [lo, hi]."""
     value = getattr(cfg, name)
     if _is_bool(value) or not isinstance(value, numbers.Integral) or not lo <= value <= hi:
-        raise InvalidOptionError(f"option {name}={value!r} must be an integer in [{lo}, {hi}]")
+        raise InvalidOptionError(f"option {name}={value!r:.80} must be an integer in [{lo}, {hi}]")
     object.__setattr__(cfg, name, int(value))
 
 
@@ -171,7 +176,7 @@ def _check_float(cfg: ArenaConfig, name: str, lo: float, hi: float) -> None:
     value = getattr(cfg, name)
     ok = isinstance(value, numbers.Real) and not _is_bool(value)
     if not ok or not math.isfinite(value) or not lo <= value <= hi:
-        raise InvalidOptionError(f"option {name}={value!r} must be a number in [{lo}, {hi}]")
+        raise InvalidOptionError(f"option {name}={value!r:.80} must be a number in [{lo}, {hi}]")
     object.__setattr__(cfg, name, float(value))
 
 
@@ -183,5 +188,5 @@ def _check_bool(cfg: ArenaConfig, name: str, optional: bool = False) -> None:
         return
     if not _is_bool(value):
         valid = "True, False or None" if optional else "True or False"
-        raise InvalidOptionError(f"option {name}={value!r} must be {valid}")
+        raise InvalidOptionError(f"option {name}={value!r:.80} must be {valid}")
     object.__setattr__(cfg, name, bool(value))

@@ -14,9 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
-from neuronsmae.protocol.errors import InvalidContextError, NeuronsMAEError
+from neuronsmae.protocol.errors import InvalidContextError, NeuronsMAEError, listed
+from neuronsmae.protocol.interface import plain_contexts, seed_value
 from neuronsmae.protocol.levels import (
     DEFAULT_LEVEL,
     LEVEL_CHOICES,
@@ -144,12 +143,13 @@ def _valid_keys() -> list[str]:
 
 
 def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
-    """Validate a reset's contexts; raise InvalidContextError naming the key and what is valid."""
-    contexts = dict(contexts or {})
+    """Validate a reset's contexts; raise InvalidContextError naming the key and what is valid.
+    NumPy scalar values count as the Python numbers they hold (bools stay refused)."""
+    contexts = plain_contexts(contexts) or {}
     bad = [key for key in contexts if not isinstance(key, str)]
     if bad:
         raise InvalidContextError(
-            f"context keys must be strings, got {bad[:5]!r}; valid keys: {_valid_keys()}"
+            f"context keys must be strings, got {listed(bad)}; valid keys: {_valid_keys()}"
         )
     values: dict[str, float] = {}
     level, bot_team = DEFAULT_LEVEL, "none"
@@ -160,13 +160,16 @@ def parse_contexts(contexts: Mapping[str, Any] | None) -> EpisodeContext:
         if key == "bot_team":
             if not isinstance(value, str) or value not in BOT_TEAMS:
                 raise InvalidContextError(
-                    f"context 'bot_team'={value!r} is not valid; choose one of {list(BOT_TEAMS)}"
+                    f"context 'bot_team'={value!r:.80} is not valid; "
+                    f"choose one of {list(BOT_TEAMS)}"
                 )
             bot_team = value
             continue
         spec = CONTEXT_TABLE.get(key)
         if spec is None:
-            raise InvalidContextError(f"unknown context key {key!r}; valid keys: {_valid_keys()}")
+            raise InvalidContextError(
+                f"unknown context key {key!r:.80}; valid keys: {_valid_keys()}"
+            )
         values[key] = _check_value(key, value, spec)
     blue = {k.chassis_field: values.get(k.name, k.default) for k in DYNAMICS_KEYS}
     red = {k.chassis_field: values.get(OPPONENT_PREFIX + k.name, k.default) for k in DYNAMICS_KEYS}
@@ -188,22 +191,18 @@ MAX_SEED = 2**63 - 1
 def check_seed(seed: Any, error: type[NeuronsMAEError] = InvalidContextError) -> int:
     """A seed as an int, or ``error`` (a reset's ``InvalidContextError`` by default; an
     arena's constructor passes ``InvalidOptionError``) saying what is valid."""
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise error(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
-    if not 0 <= int(seed) <= MAX_SEED:
-        raise error(f"seed {int(seed)} is out of range; valid: [0, {MAX_SEED}]")
-    return int(seed)
+    return seed_value(seed, error=error)
 
 
 def _check_value(key: str, value: Any, spec: ContextKey) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):  # NumPy: plain_contexts
         raise InvalidContextError(
-            f"context {key!r} must be a number in [{spec.lo}, {spec.hi}], got {value!r}"
+            f"context {key!r} must be a number in [{spec.lo}, {spec.hi}], got {value!r:.80}"
         )
     value = float(value)
     if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
         raise InvalidContextError(
-            f"context {key!r}={value!r} is out of range; valid: [{spec.lo}, {spec.hi}]"
+            f"context {key!r}={value!r:.80} is out of range; valid: [{spec.lo}, {spec.hi}]"
         )
     return value
 

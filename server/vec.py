@@ -21,11 +21,19 @@ import numpy as np
 from neuronsmae.protocol.errors import (
     ClosedError,
     InvalidActionError,
-    InvalidOptionError,
     NeuronsMAEError,
     ResetNeededError,
 )
-from neuronsmae.protocol.interface import VecArenaAPI, inherit_docstrings, per_arena
+from neuronsmae.protocol.interface import (
+    VecArenaAPI,
+    check_seeds,
+    count_option,
+    first_seed,
+    inherit_docstrings,
+    per_arena,
+    plain_contexts,
+    seeds_per_arena,
+)
 from neuronsmae.protocol.messages import MAX_ARENAS
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import check_seed, parse_contexts
@@ -50,6 +58,12 @@ class VecArena(VecArenaAPI):
     """``num_envs`` arenas with seeds ``seed, seed + 1, ...`` and the same ``**options``.
 
     ``factory`` builds one arena (``Arena`` by default; the server passes its own).
+    ``seed`` is an integer (None is refused, as ``Arena(seed=None)`` is) and ``num_envs`` a
+    Python or NumPy integer in [1, 64]; otherwise ``InvalidOptionError``.
+
+    ``step`` checks the rows of the arenas that step in the call only: an inactive or
+    autoresetting arena's row is ignored (see ``VecArenaAPI.step``), exactly as a vector
+    server and a ``VecRM`` over any number of servers do.
     """
 
     def __init__(
@@ -60,12 +74,9 @@ class VecArena(VecArenaAPI):
         factory: Callable[..., Arena] = Arena,
         **options: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int):
-            raise InvalidOptionError(f"num_envs must be an integer, got {num_envs!r}")
-        if not 1 <= num_envs <= MAX_ARENAS:
-            raise InvalidOptionError(f"num_envs must be in [1, {MAX_ARENAS}], got {num_envs}")
+        num_envs = count_option("num_envs", num_envs, 1, MAX_ARENAS)
         self.num_envs = num_envs
-        self.seed = int(seed)
+        self.seed = first_seed(seed, num_envs)
         self.arenas: list[Arena] = []
         try:
             for i in range(num_envs):
@@ -112,14 +123,14 @@ class VecArena(VecArenaAPI):
         k = self.num_envs
         rows = self._rows(actions)
         on = self._flags(active)
-        seeds = self._entries("seeds", seeds)
+        seeds = [None] * k if seeds is None else check_seeds(seeds, k)
         contexts = self._entries("contexts", contexts)
         resetting = on & self._done
         checked: dict[int, list[Any]] = {}
         for i in range(k):  # check everything first: a refused request changes no arena
-            if resetting[i]:
+            if contexts[i] is not None or seeds[i] is not None:  # given for any arena: checked
                 self._check_reset(i, contexts[i], seeds[i])
-            elif on[i]:
+            if on[i] and not resetting[i]:
                 with _in_arena(i, self.num_envs):
                     checked[i] = self.arenas[i].check_actions(rows[i])
         rewards = np.zeros(self._obs.shape[:2], dtype=np.float64)
@@ -175,7 +186,7 @@ class VecArena(VecArenaAPI):
 
     def _reset_one(self, i: int, contexts: Mapping[str, Any] | None, seed: Any) -> None:
         self.arenas[i].reset(contexts, None if seed is None else int(seed))
-        self._contexts[i] = None if contexts is None else dict(contexts)
+        self._contexts[i] = plain_contexts(contexts)
         self._done[i] = False
         self._remember(i)
 
@@ -193,11 +204,7 @@ class VecArena(VecArenaAPI):
         return self._entries("contexts", contexts)
 
     def _seeds_per_arena(self, seed: Any) -> list[Any]:
-        if seed is None:
-            return [None] * self.num_envs
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
-            return [check_seed(seed) + i for i in range(self.num_envs)]
-        return self._entries("seed", seed)
+        return seeds_per_arena(seed, self.num_envs)
 
     def _entries(self, name: str, values: Any) -> list[Any]:
         """One entry (or None) per arena, as a list; None → all None."""

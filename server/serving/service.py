@@ -41,7 +41,7 @@ from neuronsmae.protocol.errors import (
     NeuronsMAEError,
     ServerError,
 )
-from neuronsmae.protocol.interface import ArenaAPI
+from neuronsmae.protocol.interface import ArenaAPI, check_seeds
 from neuronsmae.protocol.messages import (
     PROTOCOL_VERSION,
     Close,
@@ -119,6 +119,22 @@ SNAPSHOT_AFTER: frozenset[type[Message]] = frozenset({Reset, Step})
 """Requests whose replies carry the state and availability masks (see ``OkReply``)."""
 ONE_ARENA: frozenset[type[Message]] = frozenset({Reset, Step, Get, Render})
 """Requests that address the one arena of a one-arena server."""
+
+
+def one_arena_only(kind: str, arenas: int) -> str:
+    """The refusal of a one-arena request ``kind`` by a server of ``arenas`` arenas, naming
+    what works instead: the vector message, or for ``render`` (which has none) a one-arena
+    server."""
+    if kind == Render.TYPE:
+        return (
+            f"'render' addresses a one-arena server; this one holds {arenas} arenas and "
+            "there is no vector render: render from a server started with --arenas 1 (RM), "
+            "or in process (VecArena.arenas[i].render())"
+        )
+    return (
+        f"{kind!r} addresses a one-arena server; this one holds {arenas} arenas: send "
+        f"'v{kind}' with one entry per arena"
+    )
 
 
 def warm_up(factory: Callable[..., ArenaAPI], seed: int = 0) -> None:
@@ -233,10 +249,7 @@ class ArenaService:
         if type(body) not in self._open_to_all:
             self._check_owner(request.session)
         if type(body) in ONE_ARENA and self.arenas != 1:
-            raise MalformedMessageError(
-                f"{body.TYPE!r} addresses a one-arena server; this one holds {self.arenas} "
-                f"arenas: send 'v{body.TYPE}' with one entry per arena"
-            )
+            raise MalformedMessageError(one_arena_only(body.TYPE, self.arenas))
         return self._handlers[type(body)](body, request.session)
 
     def _check_owner(self, session: str) -> None:
@@ -363,6 +376,8 @@ class ArenaService:
         assert self._built is not None
         self._built.used = True
         vec = self._vec
+        if body.seeds is not None:  # named as the wire field, not as VecArena's argument
+            check_seeds(body.seeds, vec.num_envs, "seeds")
         vec.reset(body.contexts, body.seeds)
         return self._arrays(vec)
 

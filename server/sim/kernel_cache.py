@@ -43,8 +43,9 @@ import numba
 
 SIM = Path(__file__).resolve().parent
 """``server/sim``."""
-PROTOCOL_MODULES = ("errors.py", "env_info.py")
-"""Modules of ``neuronsmae.protocol`` that kernel modules import (constants, errors)."""
+PROTOCOL_MODULES = ("errors.py", "env_info.py", "actions.py")
+"""Modules of ``neuronsmae.protocol`` that kernel modules import (constants, errors, action
+checks)."""
 
 
 def kernel_sources() -> list[Path]:

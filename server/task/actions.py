@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.env_info import V_MAX, W_MAX
-from neuronsmae.protocol.errors import InvalidActionError
+from neuronsmae.protocol.actions import check_joint
 
 DISCRETE_SPEED = 1.0
 DISCRETE_MOVES = ("stop", "forward", "back", "left", "right")
@@ -54,69 +53,6 @@ def n_actions(space: str, n_enemy: int, k: int) -> int:
     }[space]
 
 
-def _as_index(agent: int, action: Any, size: int) -> int:
-    if isinstance(action, np.ndarray) and action.shape == ():
-        action = action.item()
-    if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
-        if isinstance(action, (float, np.floating)) and float(action).is_integer():
-            action = int(action)
-        else:
-            raise InvalidActionError(
-                f"agent {agent}: action must be an integer in [0, {size - 1}], got {action!r}"
-            )
-    if not 0 <= int(action) < size:
-        raise InvalidActionError(
-            f"agent {agent}: action {int(action)} is out of range; valid: [0, {size - 1}]"
-        )
-    return int(action)
-
-
-def _as_continuous(agent: int, action: Any, n_enemy: int, clip: bool) -> tuple[float, ...]:
-    try:
-        arr = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidActionError(
-            f"agent {agent}: continuous action must be 4 numbers (vx, vy, omega, target), "
-            f"got {action!r}"
-        ) from None
-    if arr.shape == (4,):  # fast path: a well-formed in-bounds action (NaN fails every test)
-        vx, vy, w, target = arr.tolist()
-        if (
-            -V_MAX <= vx <= V_MAX
-            and -V_MAX <= vy <= V_MAX
-            and -W_MAX <= w <= W_MAX
-            and target.is_integer()
-            and 0 <= target < n_enemy
-        ):
-            return (vx, vy, w, int(target))
-    if arr.shape != (4,):
-        raise InvalidActionError(
-            f"agent {agent}: continuous action must have shape (4,) (vx, vy, omega, target), "
-            f"got shape {arr.shape}"
-        )
-    if not np.isfinite(arr).all():
-        raise InvalidActionError(f"agent {agent}: action has NaN or infinite values: {arr}")
-    bounds = ((-V_MAX, V_MAX), (-V_MAX, V_MAX), (-W_MAX, W_MAX))
-    vals = []
-    for name, v, (lo, hi) in zip(("vx", "vy", "omega"), arr[:3], bounds, strict=True):
-        if not lo <= v <= hi:
-            if not clip:
-                raise InvalidActionError(
-                    f"agent {agent}: {name}={v} is outside [{lo}, {hi}] "
-                    "(or build the arena with clip_actions=True)"
-                )
-            v = min(max(v, lo), hi)
-        vals.append(float(v))
-    target = arr[3]
-    if clip:
-        target = min(max(round(target), 0), n_enemy - 1)
-    if not float(target).is_integer() or not 0 <= target < n_enemy:
-        raise InvalidActionError(
-            f"agent {agent}: target={arr[3]} must be an integer in [0, {n_enemy - 1}]"
-        )
-    return (*vals, int(target))
-
-
 class ActionDecoder:
     """Checks a joint action and turns it into intents for the controlled robots."""
 
@@ -128,19 +64,12 @@ class ActionDecoder:
         self.size = n_actions(space, n_enemy, k)
         self._first = _first_only(k)
 
-    def validate(self, actions: Sequence[Any], n_agents: int) -> list[Any]:
-        """Raise InvalidActionError for a wrong count, type, index, NaN or bound."""
-        if isinstance(actions, (str, bytes, dict)) or not hasattr(actions, "__len__"):
-            raise InvalidActionError(
-                f"actions must be a sequence of {n_agents} per-agent actions, got {actions!r}"
-            )
-        if len(actions) != n_agents:
-            raise InvalidActionError(
-                f"expected {n_agents} actions (one per agent), got {len(actions)}"
-            )
-        if self.space == "continuous":
-            return [_as_continuous(i, a, self.n_enemy, self.clip) for i, a in enumerate(actions)]
-        return [_as_index(i, a, self.size) for i, a in enumerate(actions)]
+    def validate(
+        self, actions: Sequence[Any], n_agents: int, used: Sequence[bool] | None = None
+    ) -> list[Any]:
+        """Raise InvalidActionError for a wrong container, count, type, index, NaN or bound
+        (:func:`~neuronsmae.protocol.actions.check_joint`; ``used`` as there)."""
+        return check_joint(actions, n_agents, self.space, self.size, self.n_enemy, self.clip, used)
 
     def decode(self, action: Any, enemies: np.ndarray, cands: np.ndarray) -> Intent:
         """One validated action → intent. ``enemies`` are the robot indices of the enemies in

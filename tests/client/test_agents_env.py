@@ -216,6 +216,12 @@ def test_actions_are_checked(make: Callable[..., gymnasium.Env[Any, Any]]) -> No
         env.step([float("nan"), 0])
     with pytest.raises(InvalidActionError, match=r"a sequence of 2 .* got 3"):
         env.step(3)  # type: ignore[arg-type]
+    # A dict played its keys, a set its arbitrary order, "35" the actions [3, 5].
+    for bad in ({0: 3, 1: 5}, {3, 5}, frozenset({3, 5}), "35", b"35"):
+        with pytest.raises(InvalidActionError, match="a sequence of 2 per-agent actions"):
+            env.step(bad)  # type: ignore[arg-type]
+    with pytest.raises(InvalidActionError, match="agent 0: an action is an integer"):
+        env.step(["3", "5"])
     unwrapped = env.unwrapped
     masks = unwrapped.get_avail_actions()  # type: ignore[attr-defined]
     assert [m.shape for m in masks] == [(unwrapped.layout.n_actions,)] * 2  # type: ignore[attr-defined]

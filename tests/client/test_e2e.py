@@ -140,8 +140,9 @@ def test_a_busy_polling_server_plays_the_same_and_stops_promptly(
         ({"busy_poll_us": float("nan")}, "busy_poll_us must be in [0, 100000] microseconds"),
         ({"time_scale": -1.0}, "time_scale must be a finite number >= 0 (0 = unlimited)"),
         ({"time_scale": float("inf")}, "time_scale must be a finite number >= 0"),
-        ({"seed": -1}, "seed must be an integer in [0, 9223372036854775807]"),
-        ({"seed": 1.5}, "seed must be an integer in [0, 9223372036854775807]"),
+        # a vector's last arena is seeded seed + num_envs - 1: its bound is 2⁶³ − num_envs
+        ({"seed": -1}, "seed must be an integer in [0, 922337203685477580"),
+        ({"seed": 1.5}, "seed must be an integer in [0, 922337203685477580"),
         ({"timeout": 0}, "timeout must be a finite number of seconds > 0, got 0"),
         ({"timeout": float("nan")}, "timeout must be a finite number of seconds > 0, got nan"),
     ],
@@ -253,6 +254,30 @@ def test_typed_errors_reach_the_caller(server_a: Server) -> None:
         with pytest.raises(InvalidContextError, match="gravity"):
             env.reset({"gravity": 1.0})
     assert context_table(server_a.port) == local_context_table()
+
+
+def test_rm_refuses_and_accepts_what_arena_does(server_a: Server) -> None:
+    """RM played a dict's keys, took a set in arbitrary order, raised builtin errors for
+    ``step(None)``, ``step(3)`` and ``reset("VK1")``, and refused NumPy context values."""
+    import numpy as np
+
+    from neuronsmae.server import Arena
+
+    local = Arena(seed=4)
+    with RM(seed=4, port=server_a.port, launch=False, timeout=30) as env:
+        for arena in (env, local):
+            arena.reset()
+            for bad in ({0: 3, 1: 5}, {3, 5}, "35", b"35", None, 3, np.array(3)):
+                with pytest.raises(InvalidActionError, match="a sequence of 2 per-agent"):
+                    arena.step(bad)  # type: ignore[arg-type]
+            with pytest.raises(InvalidContextError, match="contexts must be a mapping"):
+                arena.reset("VK1")  # type: ignore[arg-type]
+        contexts = {"VK1": np.float32(0.25), "coef": np.int64(2), "level": np.int32(1)}
+        got, want = env.reset(contexts, seed=3), local.reset(contexts, seed=3)
+        assert np.stack(got).tobytes() == np.stack(want).tobytes()
+        with pytest.raises(InvalidContextError, match="'coef' must be a number"):
+            env.reset({"coef": np.bool_(True)})
+    local.close()
 
 
 def _raw(**fields: Any) -> bytes:

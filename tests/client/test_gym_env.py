@@ -173,6 +173,8 @@ def test_bad_joint_actions_raise_with_the_expected_shape(make: Callable[..., Coo
     cont.reset(seed=0)
     with pytest.raises(InvalidActionError, match="vx"):
         cont.step(np.array([[5.0, 0, 0, 0], [0, 0, 0, 0]], dtype=np.float32))
+    with pytest.raises(InvalidActionError, match="4 finite numbers"):  # NumPy read "1" as 1.0
+        cont.step(np.array([["1", "0", "0", "0"], ["0", "1", "0", "1"]]))
 
 
 # ---- infos, rewards, termination, truncation ------------------------------------------------

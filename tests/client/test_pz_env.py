@@ -315,8 +315,11 @@ def test_actions_needed_for_live_agents_only(make: Callable[..., ArenaParallelEn
     with pytest.raises(InvalidActionError, match="blue_1"):
         env.step({"blue_0": np.zeros(4, dtype=np.float32)})
     zero = np.zeros(4, dtype=np.float32)
-    # Names that are not live (here: unknown) are ignored, as for destroyed agents.
-    obs, *_ = env.step({"blue_0": zero, "blue_1": zero, "red_0": zero})
+    # A name that is no agent (a typo, or red in cooperative mode) was dropped silently.
+    for extra in ("red_0", "blue_00"):
+        with pytest.raises(InvalidActionError, match=rf"'{extra}'.*live agents are \['blue_0'"):
+            env.step({"blue_0": zero, "blue_1": zero, extra: zero})
+    obs, *_ = env.step({"blue_0": zero, "blue_1": zero})
     assert set(obs) == {"blue_0", "blue_1"}
 
 

@@ -151,6 +151,9 @@ def test_actions_accept_anything_int_takes_and_refuse_the_rest(
         env.step([float("nan"), 0])
     with pytest.raises(InvalidActionError, match=r"a sequence of 2 .* got None"):
         env.step(None)  # type: ignore[arg-type]
+    for bad in ({0: 3, 1: 5}, {3, 5}, "35"):  # its keys, no order, its characters
+        with pytest.raises(InvalidActionError, match="a sequence of 2 per-agent actions"):
+            env.step(bad)  # type: ignore[arg-type]
     for bad in (-1, 2, 1.0, True):
         with pytest.raises(IndexError, match=r"agent_id must be an integer in \[0, 1\]"):
             env.get_obs_agent(bad)  # type: ignore[arg-type]

@@ -225,3 +225,56 @@ def test_a_stopped_vector_server_times_out_as_a_typed_error(
     finally:
         server.proc.send_signal(signal.SIGCONT)
         remote.close()
+
+
+@pytest.mark.parametrize("servers", [1, 2])
+def test_one_input_rule_whatever_the_server_count(
+    start_server: Callable[..., Server], servers: int
+) -> None:
+    """Rows of arenas that do not step are ignored, every seed and context entry is checked,
+    a bot-driven team's actions are ignored: as VecArena does (``tests/server``), on one
+    server or several. Two servers refused an inactive arena's bad row; one accepted it."""
+    from tests.server import test_vec_inputs as rules
+
+    share = str(4 // servers)
+    ports = [start_server("--arenas", share).port for _ in range(servers)]
+    with VecRM(seed=0, port=ports, num_envs=4, launch=False, timeout=60, **rules.SHORT) as vec:
+        rules.ignored_rows_are_not_checked(vec)
+        rules.given_entries_are_checked(vec)
+        rules.reset_arguments_are_typed(vec)
+    ports = [start_server("--arenas", "1").port for _ in range(2)]
+    with VecRM(seed=0, port=ports, num_envs=2, launch=False, mode="competitive") as vec:
+        rules.bot_team_rows_are_not_checked(vec)
+
+
+def test_steps_in_flight_are_settled_before_rows_are_checked(
+    start_server: Callable[..., Server],
+) -> None:
+    """Over several servers the client must know who autoresets: a step still in flight
+    that touches an arena of the next step is gathered first."""
+    from tests.server.test_vec_inputs import SHORT
+
+    ports = [start_server("--arenas", "1").port for _ in range(2)]
+    with VecRM(seed=0, port=ports, num_envs=2, launch=False, **SHORT) as vec:
+        vec.reset(seed=0)
+        zeros = np.zeros((2, 2), np.int64)
+        first = vec.step_async(zeros)
+        second = vec.step_async(zeros)  # ends both episodes
+        third = vec.step_async(np.full((2, 2), 9))  # both autoreset: rows ignored
+        assert not first.result()[2].any() and second.result()[2].all()
+        assert not third.result()[2].any()
+
+
+def test_vector_seeds_and_counts_are_checked_like_vecarena() -> None:
+    """``VecRM(seed=None)`` was a builtin TypeError and ``num_envs=np.int64(2)`` refused;
+    both are checked before anything is launched."""
+    from .conftest import free_port
+
+    port = free_port()
+    for seed in (None, 1.5, "3", True):  # num_envs passes (a NumPy integer), the seed not
+        with pytest.raises(InvalidOptionError, match=r"seed must be an integer in \[0, "):
+            VecRM(seed=seed, port=port, num_envs=np.int64(2))  # type: ignore[arg-type]
+    with pytest.raises(InvalidOptionError, match="num_envs must be an integer"):
+        VecRM(port=port, num_envs=np.bool_(True))  # type: ignore[arg-type]
+    with pytest.raises(ServerUnavailableError):  # nothing was launched
+        ping(port, timeout=0.5)

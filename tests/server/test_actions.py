@@ -45,8 +45,8 @@ def test_bad_actions_raise_naming_agent_and_bound(space: str, actions, needle: s
 
 
 def test_clip_option_clips_instead() -> None:
-    """Out-of-bound motions and targets play exactly as the bounds they are clipped to."""
-    from neuronsmae.server.task.actions import V_MAX, W_MAX
+    """Out-of-bound motions play exactly as the bounds they are clipped to."""
+    from neuronsmae.protocol.env_info import V_MAX, W_MAX
 
     clipped, bounded = (Arena(seed=1, action_space="continuous", clip_actions=True)
                         for _ in range(2))  # fmt: skip
@@ -54,7 +54,7 @@ def test_clip_option_clips_instead() -> None:
         clipped.reset()
         bounded.reset()
         for _ in range(3):
-            clipped.step([[9.0, -9.0, 5.0, 3.4], [0, 0, -7.0, -2]])
+            clipped.step([[9.0, -9.0, 5.0, 1], [0, 0, -7.0, 0]])
             bounded.step([[V_MAX, -V_MAX, W_MAX, 1], [0, 0, -W_MAX, 0]])
         np.testing.assert_array_equal(clipped.get_state(), bounded.get_state())
         moved = Arena(seed=1, action_space="continuous", clip_actions=True)
@@ -66,6 +66,58 @@ def test_clip_option_clips_instead() -> None:
     finally:
         clipped.close()
         bounded.close()
+
+
+@pytest.mark.parametrize("target", [0.5, -3, 7, 1e300, True, "1"])
+def test_clip_option_never_clips_the_target(target) -> None:
+    """``clip_actions`` clips motion commands; a target names an enemy, so one that names
+    none (a fraction, out of range, a bool or a string) is refused even so."""
+    a = Arena(seed=1, action_space="continuous", clip_actions=True)
+    a.reset()
+    with pytest.raises(InvalidActionError, match="agent 0"):
+        a.step([[9.0, 0, 0, target], [0, 0, 0, 0]])
+    a.close()
+
+
+@pytest.mark.parametrize(
+    "row", [["1", 0, 0, 0], [b"1", 0, 0, 0], [True, 0, 0, 0], np.array(["1", "0", "0", "0"])]
+)
+def test_continuous_actions_must_be_numbers(row) -> None:
+    """Strings, bytes and bools are refused as discrete actions are, though NumPy would
+    convert them; NumPy numbers and tuples of them are accepted."""
+    a = Arena(seed=1, action_space="continuous")
+    a.reset()
+    with pytest.raises(InvalidActionError, match="agent 0: continuous action must be 4 numbers"):
+        a.step([row, [0, 1, 0, 1]])
+    a.step([(np.float32(0.5), np.int64(0), 0.0, 1), np.array([0, 1, 0, 1])])
+    a.close()
+
+
+@pytest.mark.parametrize("actions", [{0: 1, 1: 1}, {0, 1}, frozenset({0, 1}), "01", b"01", None, 3])
+def test_actions_must_be_a_sequence(actions) -> None:
+    """A mapping (its keys), a set (no order), a string (its characters) or a scalar is not
+    a joint action."""
+    a = Arena(seed=1)
+    a.reset()
+    with pytest.raises(InvalidActionError, match="actions must be a sequence of 2"):
+        a.step(actions)
+    a.close()
+
+
+def test_a_bot_driven_teams_actions_are_not_checked() -> None:
+    """Competitive mode, ``bot_team="red"``: red's entries are ignored, so not checked (the
+    count still is), as a vector ignores the rows of arenas that do not step."""
+    a = Arena(seed=1, mode="competitive")
+    a.reset({"bot_team": "red"})
+    a.step([0, 1, 99, "x"])
+    with pytest.raises(InvalidActionError, match="agent 0"):
+        a.step([99, 1, 0, 0])
+    with pytest.raises(InvalidActionError, match="expected 4 actions"):
+        a.step([0, 1])
+    a.reset({"bot_team": "none"})
+    with pytest.raises(InvalidActionError, match="agent 2"):
+        a.step([0, 1, 99, 0])
+    a.close()
 
 
 def test_masks_for_dead_robots_and_dead_enemies() -> None:

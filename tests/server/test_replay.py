@@ -188,3 +188,23 @@ def test_the_video_writers_refuse_a_rate_outside_its_range(tmp_path: Path) -> No
         write_video(tmp_path / "a.gif", [frame], every=0)
     assert not (tmp_path / "a.gif").exists()
     assert write_gif(tmp_path / "b.gif", [frame, frame], 50.0).exists()
+
+
+def test_a_truncated_header_is_not_called_empty(recorded: Path, tmp_path: Path) -> None:
+    """A gzip stream cut before its first newline, or a header line cut short, said
+    "empty file": they are truncated, and only a file without content is empty."""
+    raw = recorded.read_bytes()
+    cut = tmp_path / "cut.jsonl.gz"
+    cut.write_bytes(raw[:60])  # the gzip stream ends early, inside the header line
+    with pytest.raises(RecordingFormatError, match="truncated or corrupt: the gzip stream"):
+        read_recording(cut)
+    header = gzip.decompress(raw).split(b"\n")[0]
+    half = tmp_path / "half.jsonl.gz"
+    half.write_bytes(gzip.compress(header[: len(header) // 2]))  # a header without its end
+    with pytest.raises(RecordingFormatError, match="header line is cut short"):
+        read_recording(half)
+    assert R.main([str(half)]) != 0
+    empty = tmp_path / "empty.jsonl.gz"
+    empty.write_bytes(gzip.compress(b""))
+    with pytest.raises(RecordingFormatError, match="empty file"):
+        read_recording(empty)

@@ -188,3 +188,27 @@ def test_a_rebuild_frees_the_old_arenas_before_building_and_survives_a_failed_bu
         first = value(svc, VReset(), "f")
     expected = np.stack([Arena(seed=10).reset(), Arena(seed=11).reset()])
     assert np.array_equal(first["obs"], expected)  # type: ignore[index]
+
+
+def test_refusals_name_what_exists_and_stay_small() -> None:
+    """A K > 1 server's refusal of ``render`` named a 'vrender' that does not exist;
+    ``vreset`` with 3 ``seeds`` for 4 arenas said "seed"; an error reply echoed every one of
+    100,000 unknown option names (~1 MB)."""
+    from neuronsmae.protocol.messages import Render
+
+    with ArenaService(Arena, seed=5, arenas=4, clock=Clock()) as svc:
+        value(svc, Configure(seed=5, arenas=4), "f")
+        reply = call(svc, Render(), "f")
+        assert isinstance(reply, ErrorReply) and reply.code == "malformed_message"
+        assert "vrender" not in reply.message and "--arenas 1" in reply.message
+        reply = call(svc, Get(what="obs"), "f")
+        assert isinstance(reply, ErrorReply) and "'vget'" in reply.message
+        reply = call(svc, VReset(seeds=[None] * 3), "f")
+        assert isinstance(reply, ErrorReply) and reply.code == "invalid_context"
+        assert reply.message.startswith("seeds must have 4 entries"), reply.message
+        many = {f"opt{i}": 1 for i in range(100_000)}
+        data = svc.handle(encode_request(Configure(seed=5, arenas=4, options=many), "f"))
+        assert len(data) < 2_000
+        reply = decode_reply(data)
+        assert isinstance(reply, ErrorReply) and reply.code == "invalid_option"
+        assert "'opt0'" in reply.message and "99992 more, 100000 in all" in reply.message
