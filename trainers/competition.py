@@ -21,7 +21,7 @@ import torch
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.protocol.policies import layout_differences
-from neuronsmae.trainers.checkpoint import Counters, save_checkpoint
+from neuronsmae.trainers.checkpoint import CheckpointError, Counters, save_checkpoint
 from neuronsmae.trainers.config import ConfigError, TrainConfig
 from neuronsmae.trainers.evaluate import load_policy
 from neuronsmae.trainers.learner import EnvSpec
@@ -53,16 +53,19 @@ class Competition:
         self.pool = OpponentPool(cfg.opponent, cfg.selfplay, cfg.seed)
         self.competitive = self.pool.has_policies
         """Whether a policy may play red: the arenas then run in competitive mode."""
+        self._fixed = {m.id: _opponent(m.value) for m in self.pool.fixed if m.kind == "ckpt"}
+        """The fixed checkpoints, read now: a missing or unreadable one stops the run before
+        Ray starts."""
 
     @property
     def enabled(self) -> bool:
         return self.pool.enabled
 
     def load_fixed(self, side: EnvInfo) -> None:
-        """Load every fixed checkpoint of the pool, checking it fits red's side."""
+        """Give the pool every fixed checkpoint, checking it fits red's side."""
         for member in self.pool.fixed:
             if member.kind == "ckpt":
-                policy = load_policy(member.value)
+                policy = self._fixed[member.id]
                 check_fits(policy, side, f"opponent checkpoint {member.value}")
                 self.pool.weights[member.id] = policy
 
@@ -113,3 +116,11 @@ class Competition:
                 raise ConfigError(f"resume: snapshot {path} is missing")
             policies[member.id] = load_policy(path)
         self.pool.load_state_dict(state, policies)
+
+
+def _opponent(path: str) -> Policy:
+    """An ``opponent`` entry's checkpoint, or a :class:`CheckpointError` naming the entry."""
+    try:
+        return load_policy(path)
+    except CheckpointError as err:
+        raise type(err)(f"opponent entry {path!r}: {err}") from None

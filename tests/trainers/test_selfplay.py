@@ -93,3 +93,23 @@ def test_a_fixed_checkpoint_is_an_opponent(tmp_path: Path, capsys: pytest.Captur
     three = make_checkpoint(tmp_path / "3v3.pt", 4, n_blue=3, n_red=3)
     _train(tmp_path / "bad", 4, f"opponent={three}", code=2)
     assert "another task layout" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["empty folder", "junk file"])
+def test_an_opponent_checkpoint_that_cannot_be_read_stops_the_run_before_ray(
+    what: str, tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from neuronsmae.trainers import train
+
+    monkeypatch.setattr(train, "start_ray", lambda cfg: pytest.fail("Ray started"))
+    entry = tmp_path / "opp"  # was found only once the workers ran, 7-10 s in
+    if what == "empty folder":
+        entry.mkdir()
+    else:
+        entry.write_bytes(b"not a checkpoint")
+    out = tmp_path / "run"
+    argv = ["--opponent", f"easy,{entry}", "--out", str(out), "--episodes", "2", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"opponent entry '{entry}'" in err
+    assert ("no checkpoint at" if what == "empty folder" else "is not a NeuronsMAE") in err
