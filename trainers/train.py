@@ -38,6 +38,7 @@ import ray
 import torch
 
 from neuronsmae.protocol import EnvInfo, InvalidContextError
+from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer, ReplayMemoryError
@@ -121,6 +122,7 @@ class Trainer:
         """Acting weights of the best validation evaluation, and that evaluation's row."""
         self.stop = StopSignals()
         """Turns Ctrl-C or SIGTERM into a stop request while :meth:`run` runs."""
+        self._check_contexts(workers=False)
         self.resumed_steps: int | None = None
         """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
         self.lock = RunLock(self.run_dir)
@@ -204,8 +206,9 @@ class Trainer:
         except ReplayMemoryError as err:
             raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
 
-    def _check_contexts(self) -> None:
-        """Reset a worker's arenas with every value the contexts can take, so a key or a
+    def _check_contexts(self, workers: bool = True) -> None:
+        """Check every value the contexts can take against the protocol's table (before any
+        worker starts), then reset a worker's arenas with them (``workers``), so a key or a
         range the arena refuses stops the run now rather than mid-way."""
         sets = [{**self.opponent, **x} for x in self.train_contexts.extremes()]
         sets += [
@@ -213,7 +216,10 @@ class Trainer:
         ]
         sets += list(self.eval_contexts.values())
         try:
-            self.sampler.check_contexts(sets)
+            for contexts in sets:
+                check_contexts(contexts)
+            if workers:
+                self.sampler.check_contexts(sets)
         except InvalidContextError as err:
             raise ConfigError(f"contexts: {err}") from err
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -311,13 +312,23 @@ def test_each_episode_draws_its_contexts_and_a_resumed_run_draws_the_same(
     assert saved["config"]["contexts"] == spec_text
 
 
-def test_contexts_the_arena_refuses_stop_the_run_before_it_starts(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("layer", "said"),
+    [({"contexts": "coef=0.5..20"}, "'coef'=20.0 is out of range; valid: [0.0, 10.0]"),
+     ({"contexts": "foo=1"}, "unknown context key 'foo'"),
+     ({"eval_contexts": "coef=-5"}, "'coef'=-5.0 is out of range")],
+)  # fmt: skip
+def test_contexts_the_arena_refuses_stop_the_run_before_any_worker_starts(
+    layer: dict[str, str], said: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from neuronsmae.trainers import train
+
+    monkeypatch.setattr(train, "start_ray", lambda cfg: pytest.fail("Ray started"))
     cfg = make_config(
-        dict(kv.split("=") for kv in TINY),
-        {"workers": 1, "episodes": 4, "out": str(tmp_path), "contexts": "coef=0.5..20"},
-    )
-    with pytest.raises(ConfigError, match="coef"):
-        Trainer(cfg)
+        dict(kv.split("=") for kv in TINY), {"workers": 1, "episodes": 4, "out": str(tmp_path)}
+    )  # an arena's reset found these 7-15 s in, once the workers had started
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        Trainer(make_config(cfg.to_dict(), layer))
 
 
 def test_a_worker_count_the_cluster_cannot_hold_is_refused_at_once(tmp_path: Path) -> None:
