@@ -19,6 +19,7 @@ from torch import nn
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
 from neuronsmae.trainers.buffer import Batch
+from neuronsmae.trainers.config_groups import LearnerConfig
 from neuronsmae.trainers.features import (
     Featurizer,
     UnknownFeaturesError,
@@ -27,7 +28,7 @@ from neuronsmae.trainers.features import (
     get_features,
     raw,
 )
-from neuronsmae.trainers.mixers import make_mixer
+from neuronsmae.trainers.mixers import make_mixer, mixer_for_algorithm
 
 
 @dataclass(frozen=True)
@@ -206,6 +207,17 @@ class QLearner:
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
+
+    @classmethod
+    def from_config(cls, env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig) -> QLearner:
+        """The learner of algorithm ``alg`` (its mixer by name) with the ``learner`` group's
+        settings."""
+        return cls(
+            env, spec, mixer_for_algorithm(alg), lr=cfg.lr, gamma=cfg.gamma,
+            grad_clip=cfg.grad_clip, target_update_interval=cfg.target_update_interval,
+            double_q=cfg.double_q, mixer_embed=cfg.mixer_embed,
+            hypernet_hidden=cfg.hypernet_hidden, td_lambda=cfg.td_lambda,
+        )  # fmt: skip
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""

@@ -59,7 +59,6 @@ from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
 from neuronsmae.trainers.interrupt import POLL_SECONDS, StopSignals, TrainingInterrupted
 from neuronsmae.trainers.learner import EnvSpec, QLearner, agent_spec
-from neuronsmae.trainers.mixers import mixer_for_algorithm
 from neuronsmae.trainers.placement import sampler_placement, start_ray
 from neuronsmae.trainers.records import Recorder, RunLock, check_new_run_dir, trim_records
 from neuronsmae.trainers.rollout import Policy, Request
@@ -180,29 +179,12 @@ class Trainer:
             lc.head, info,
         )  # fmt: skip
         self.competition.load_fixed(info)
-        self.learner = QLearner(
-            self.env,
-            self.spec,
-            mixer_for_algorithm(cfg.alg),
-            lr=cfg.learner.lr,
-            gamma=cfg.learner.gamma,
-            grad_clip=cfg.learner.grad_clip,
-            target_update_interval=cfg.learner.target_update_interval,
-            double_q=cfg.learner.double_q,
-            mixer_embed=cfg.learner.mixer_embed,
-            hypernet_hidden=cfg.learner.hypernet_hidden,
-            td_lambda=cfg.learner.td_lambda,
-        )
+        self.learner = QLearner.from_config(self.env, self.spec, cfg.alg, cfg.learner)
         self.group = task_group(parse_generators(lc.augment), lc.features, info)
+        env, size = self.env, cfg.learner.buffer_size
         try:
-            self.buffer = EpisodeReplayBuffer(
-                cfg.learner.buffer_size,
-                self.env.n_agents,
-                self.env.obs_dim,
-                self.env.state_dim,
-                self.env.n_actions,
-                self.env.episode_limit,
-            )
+            self.buffer = EpisodeReplayBuffer(size, env.n_agents, env.obs_dim, env.state_dim,
+                                              env.n_actions, env.episode_limit)  # fmt: skip
         except ReplayMemoryError as err:
             raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
 
