@@ -135,7 +135,7 @@ class TrainConfig:
     the default two)."""
     envs_per_worker: int = 8
     """Arenas each worker plays at once, in [1, 64], with one batched forward pass of the
-    agent network per decision for all of them. At 8 a served arena costs about 1.15 times
+    agent network per decision for all of them. At 8 a served arena costs about 1.2 times
     the CPU of an in-process one per decision (``python -m bench.bench_vector``)."""
     sync: bool = False
     """Paper's loop: play an iteration of episodes, wait for all, then learn; else learn as

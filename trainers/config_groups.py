@@ -112,8 +112,10 @@ class LearnerConfig:
     """λ of the TD(λ) targets in [0, 1] (0: the paper's one-step targets; PyMARL2 uses 0.6).
     Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
     while λ > 0 still moves a win's +20 back faster. Measured against the easy bot in 30
-    minutes on 2 cores, test win rate over seeds 1-3: 0.89 / 0.885 / 0.86 with 0.3, 0.90 /
-    0.86 with 0.1 (seeds 1-2), 0.86 / 0.875 with 0.6 (``python -m bench.bench_learning
+    minutes on 2 cores of a VM at 1,453 µs per decision (about 6,000 episodes; the fast VM's
+    runs of the defaults read 0.91 / 0.905 / 0.93, docs/results.md), test win rate over
+    seeds 1-3: 0.89 / 0.885 / 0.86 with 0.3, 0.90 / 0.86 with 0.1 (seeds 1-2), 0.86 / 0.875
+    with 0.6 (``python -m bench.bench_learning
     --set td_lambda=0.6 --seed 2``)."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
