@@ -25,9 +25,10 @@ import zenoh
 
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
-from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_locator, zenoh_message
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, zenoh_message
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.contexts import context_table
+from neuronsmae.server.serving.locators import check_endpoint
 from neuronsmae.server.serving.rpc import (
     Interrupted,
     PortInUseError,
@@ -151,7 +152,7 @@ def invalid_arguments(args: argparse.Namespace) -> list[str]:
         problems.append(f"--lease must be a finite number of seconds > 0, got {args.lease:g}")
     for router in args.router:
         try:
-            check_locator(router, "--router")
+            check_endpoint(router, "--router")
         except InvalidOptionError as exc:
             problems.append(str(exc))
     try:

@@ -14,10 +14,13 @@ kernels are compiled (and cached on disk) once rather than by all N at once. Eve
 server that exited is started again (with a growing delay while it keeps dying), and one
 that misses ``--max-missed`` pings in a row is killed and started again (0: never).
 SIGINT/SIGTERM stop every server (SIGTERM, then SIGKILL after 10 s) and exit 0. The pids
-are written to a state file so that ``status`` can show them next to each server's health.
+are written to a state file so that ``status`` can show them next to each server's health;
+a fleet writes it only once it has taken it, before any server starts (see
+:mod:`neuronsmae.server.serving.statefile`).
 
-Exit status: 0 after a signal, 2 on bad arguments or when a server cannot start at all
-(its port is taken), 1 for ``status`` when any server is down.
+Exit status: 0 after a signal, 2 on bad arguments (``$NEURONSMAE_STATE_DIR`` included) or
+when a server cannot start at all (its port is taken, the state file is another running
+fleet's or no fleet's), 1 for ``status`` when any server is down.
 """
 
 from __future__ import annotations
@@ -25,15 +28,16 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.protocol.launch import check_timeout
+from neuronsmae.server.serving.locators import check_endpoint
 from neuronsmae.server.serving.probe import Probe
 from neuronsmae.server.serving.rpc import check_listen_host
+from neuronsmae.server.serving.statefile import StateFileError, load, pid_alive, state_path
 from neuronsmae.server.serving.supervisor import (
     BAD_ARGUMENTS,
     Fleet,
@@ -41,7 +45,6 @@ from neuronsmae.server.serving.supervisor import (
     FleetStartError,
     StopFlag,
     check_interval,
-    state_path,
 )
 
 log = logging.getLogger("neuronsmae.serve")
@@ -49,33 +52,17 @@ log = logging.getLogger("neuronsmae.serve")
 # ---- status --------------------------------------------------------------------------------
 
 
-def _pid_alive(pid: object) -> bool:
-    if not isinstance(pid, int):
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def read_state(path: Path) -> dict[int, dict[str, object]]:
-    """Port → recorded server entry, from a running fleet's state file (empty if none)."""
+    """Port → recorded server entry, from a running fleet's state file (empty if none, and
+    with a warning naming the file when it is unreadable or no fleet's state)."""
     try:
-        state = json.loads(path.read_text())
-    except FileNotFoundError:
+        state = load(path)
+    except StateFileError as exc:
+        log.warning("%s; ignoring it (no pids shown)", exc)
         return {}
-    except (OSError, ValueError) as exc:
-        log.warning("ignoring unreadable fleet state file %s: %s", path, exc)
+    if state is None or not pid_alive(state.get("fleet_pid")):
         return {}
-    if not isinstance(state, dict) or not isinstance(state.get("servers", []), list):
-        log.warning("ignoring fleet state file %s: not a fleet's state", path)
-        return {}
-    if not _pid_alive(state.get("fleet_pid")):
-        return {}
-    return {int(s["port"]): s for s in state.get("servers", []) if "port" in s}
+    return {s["port"]: s for s in state.get("servers", [])}
 
 
 def status(
@@ -93,7 +80,7 @@ def status(
         rows.append(
             {
                 "port": port,
-                "pid": pid if _pid_alive(pid) else None,
+                "pid": pid if pid_alive(pid) else None,
                 "state": "up" if health.up else "down",
                 "ping_ms": None if health.ms is None else round(health.ms, 2),
                 "server": (health.server or "")[:8],
@@ -186,6 +173,8 @@ def _spec(args: argparse.Namespace, **extra: object) -> FleetSpec:
             f"--base-port {args.base_port} --count {args.count}: --count must be ≥ 1 and "
             "every port (--base-port to --base-port + --count - 1) in 1..65535"
         )
+    for router in args.router:
+        check_endpoint(router, "--router")
     return FleetSpec(
         base_port=args.base_port,
         count=args.count,

@@ -9,7 +9,6 @@ because this process holds Zenoh sessions for its pings.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -25,9 +24,15 @@ from typing import IO
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.launch import ServerCommand, check_launch
 from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
-from neuronsmae.protocol.transport import check_locator
+from neuronsmae.server.serving.locators import check_endpoint
 from neuronsmae.server.serving.probe import Health, Probe
 from neuronsmae.server.serving.rpc import PortInUseError, check_listen_host, check_port
+from neuronsmae.server.serving.statefile import (
+    StateFile,
+    StateFileError,
+    check_state_dir,
+    state_path,
+)
 
 log = logging.getLogger("neuronsmae.serve")
 
@@ -69,16 +74,10 @@ class FleetSpec:
                 f"lease must be a finite number of seconds > 0, got {self.lease}"
             )
         for router in self.routers:
-            check_locator(router)
+            check_endpoint(router, "router")
 
     def ports(self) -> list[int]:
         return [self.base_port + i for i in range(self.count)]
-
-
-def state_path(base_port: int) -> Path:
-    """Where the fleet on ``base_port`` records its pids (``$NEURONSMAE_STATE_DIR`` or tmp)."""
-    root = os.environ.get("NEURONSMAE_STATE_DIR") or tempfile.gettempdir()
-    return Path(root) / f"neuronsmae-serve-{base_port}.json"
 
 
 @dataclass
@@ -126,6 +125,8 @@ class Fleet:
         default_logs = Path(tempfile.gettempdir()) / f"neuronsmae-serve-{spec.base_port}"
         self.log_dir = log_dir or default_logs
         self.state_file = state_file or state_path(spec.base_port)
+        check_state_dir(self.state_file, explicit=state_file is not None)
+        self._state = StateFile(self.state_file)
         self.max_missed = max_missed
         self.members = [
             Member(i, port, spec.seed + i * spec.arenas) for i, port in enumerate(spec.ports())
@@ -155,8 +156,10 @@ class Fleet:
     def start(self, timeout: float = STARTUP_TIMEOUT, stop: StopFlag | None = None) -> None:
         """Start server 0, wait for it (it fills the JIT cache), then start the rest.
 
-        Raises :class:`FleetStartError` when a port is taken or a server exits while
-        starting; a server that is merely slow is left to :meth:`check`.
+        Raises :class:`FleetStartError` when a port is taken, the state file is another
+        fleet's (or cannot be written) or a server exits while starting; a server that is
+        merely slow is left to :meth:`check`. Nothing is started, and the state file is left
+        as it was, unless the ports are free and the state file is this fleet's.
         """
         try:
             check_listen_host(self.spec.host)
@@ -168,6 +171,7 @@ class Fleet:
             except PortInUseError as exc:
                 msg = f"{exc}; stop what uses it or pick another --base-port"
                 raise FleetStartError(msg) from exc
+        self._claim_state()
         first, rest = self.members[:1], self.members[1:]
         for group in (first, rest):
             if stop is not None and stop.set:
@@ -190,11 +194,15 @@ class Fleet:
                 if self._ping(member).up:
                     waiting.remove(member)
             time.sleep(0.1 if waiting else 0.0)
+        if stop is not None and stop.set:
+            return  # stopping: the servers still starting are about to be stopped
         for member in waiting:
             log.warning("server on port %d is not answering yet", member.port)
 
     def stop(self) -> None:
-        """SIGTERM every server, SIGKILL those still there after ``STOP_TIMEOUT``."""
+        """SIGTERM every server, SIGKILL those still there after ``STOP_TIMEOUT``; mark them
+        stopped in the state file if this fleet owns it (a fleet that never started leaves
+        the file alone)."""
         running = [m for m in self.members if m.alive()]
         for member in running:
             assert member.proc is not None
@@ -317,8 +325,28 @@ class Fleet:
             member.proc.kill()
             member.proc.wait()
 
+    def _claim_state(self) -> None:
+        """Make the state file this fleet's before any server starts (FleetStartError when
+        it belongs to another fleet, is no fleet's state, or cannot be written)."""
+        try:
+            self._state.claim(self._state_record())
+        except StateFileError as exc:
+            raise FleetStartError(str(exc)) from exc
+        except OSError as exc:
+            raise FleetStartError(
+                f"fleet state file {self.state_file} cannot be written "
+                f"({exc.strerror or exc}); choose a writable folder with NEURONSMAE_STATE_DIR"
+            ) from exc
+
     def _write_state(self, stopped: bool = False) -> None:
-        state = {
+        """Record the pids (None once ``stopped``), if this fleet owns the state file."""
+        try:
+            self._state.write(self._state_record(stopped))
+        except OSError as exc:  # supervision goes on; only ``status`` loses the pids
+            log.warning("cannot write the fleet state file %s: %s", self.state_file, exc)
+
+    def _state_record(self, stopped: bool = False) -> dict[str, object]:
+        return {
             "fleet_pid": None if stopped else os.getpid(),
             "spec": asdict(self.spec),
             "servers": [
@@ -332,9 +360,6 @@ class Fleet:
                 for m in self.members
             ],
         }
-        tmp = self.state_file.with_suffix(".tmp")
-        tmp.write_text(json.dumps(state, indent=1))
-        tmp.replace(self.state_file)  # atomic: ``status`` never reads half a file
 
 
 def check_interval(interval: object) -> None:

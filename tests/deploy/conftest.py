@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -26,6 +27,23 @@ def free_ports(count: int = 1) -> int:
         if base + count < 65536 and all(_free(base + i) for i in range(1, count)):
             return base
     raise RuntimeError(f"no {count} consecutive free ports")
+
+
+TEST_PORTS = range(28000, 29000)
+"""Where the tests of the fleet's state file and the router's defaults take their ports: a
+block of its own on a shared machine, below the kernel's ephemeral range (from 32768) that
+:func:`free_ports` draws from."""
+
+
+def free_test_ports(count: int = 1) -> int:
+    """The first of ``count`` consecutive loopback ports in :data:`TEST_PORTS` that are
+    free right now, from a random start so that concurrent runs rarely meet."""
+    starts = list(TEST_PORTS[: len(TEST_PORTS) - count + 1])
+    offset = random.randrange(len(starts))
+    for base in starts[offset:] + starts[:offset]:
+        if all(_free(base + i) for i in range(count)):
+            return base
+    raise RuntimeError(f"no {count} consecutive free ports in {TEST_PORTS}")
 
 
 def _free(port: int) -> bool:
@@ -56,13 +74,20 @@ def listening(port: int) -> bool:
 
 @pytest.fixture
 def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen[bytes]]]:
-    """Start a command (output to a log file in tmp_path); every one is stopped at the end."""
+    """Start a command (output to a log file in tmp_path, ``env`` added to the environment);
+    every one is stopped at the end."""
     started: list[subprocess.Popen[bytes]] = []
 
-    def start(*cmd: str, name: str = "proc") -> subprocess.Popen[bytes]:
+    def start(
+        *cmd: str, name: str = "proc", env: dict[str, str] | None = None
+    ) -> subprocess.Popen[bytes]:
         with (tmp_path / f"{name}-{len(started)}.log").open("wb") as log:
             proc = subprocess.Popen(
-                [sys.executable, *cmd], stdin=subprocess.DEVNULL, stdout=log, stderr=log
+                [sys.executable, *cmd],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
+                env=None if env is None else {**os.environ, **env},
             )
         started.append(proc)
         return proc

@@ -143,6 +143,7 @@ def test_bad_count_is_a_usage_error() -> None:
         (["--time-scale", "-2"], "time_scale must be a finite number >= 0"),
         (["--arenas", "65"], "arenas must be an integer in [1, 64], got 65"),
         (["--router", "10.0.0.1:7447"], "router must be a Zenoh locator <protocol>/<address>"),
+        (["--router", "tcp/127.0.0.1:99999"], "--router must be a Zenoh locator tcp/<host>:<port>"),
         (["--interval", "0"], "interval must be a finite number of seconds >= 0.1, got 0.0"),
         (["--interval", "nan"], "interval must be a finite number of seconds >= 0.1, got nan"),
         (["--ping-timeout", "0"], "--ping-timeout must be a finite number of seconds > 0"),

@@ -7,7 +7,9 @@ import logging
 
 import pytest
 
+from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.server.serving import cli
+from neuronsmae.server.serving.locators import check_endpoint
 
 
 def test_defaults_are_valid() -> None:
@@ -37,6 +39,15 @@ def test_defaults_are_valid() -> None:
             "--router must be a Zenoh locator <protocol>/<address> such as tcp/10.0.0.1:7447, "
             "got 'h:7447'",
         ),
+        (
+            ["--router", "tcp/127.0.0.1:99999"],
+            "--router must be a Zenoh locator tcp/<host>:<port> with a port in 1..65535, such "
+            "as tcp/10.0.0.1:7447, got 'tcp/127.0.0.1:99999'",
+        ),
+        (["--router", "tcp/127.0.0.1:0"], "with a port in 1..65535"),
+        (["--router", "tls/10.0.0.1"], "--router must be a Zenoh locator tls/<host>:<port>"),
+        (["--router", "tcp/:7447"], "got 'tcp/:7447'"),
+        (["--router", "udp/h:x"], "got 'udp/h:x'"),
         (["--host", ""], "--host must be an address of this machine such as 127.0.0.1"),
         (["--host", "nohost.invalid"], "--host 'nohost.invalid' does not resolve"),
         (["--host", "192.0.2.1"], "--host '192.0.2.1' is not an address of this machine"),
@@ -54,3 +65,27 @@ def test_every_problem_is_reported_at_once() -> None:
     args = cli._parser().parse_args(["--port", "0", "--arenas", "99", "--lease", "-1"])
     problems = cli.invalid_arguments(args)
     assert [p.split()[0] for p in problems] == ["--port", "--arenas", "--lease"]
+
+
+@pytest.mark.parametrize(
+    "locator",
+    [
+        "tcp/10.0.0.1:7447",
+        "tcp/[::1]:7447",
+        "tls/router.lan:7447",
+        "tcp/127.0.0.1:7447#iface=lo",
+        "quic/h:65535",
+        "unixsock-stream/tmp/zenoh.sock",
+    ],
+)
+def test_a_valid_router_is_accepted(locator: str) -> None:
+    check_endpoint(locator, "--router")
+    assert cli.invalid_arguments(cli._parser().parse_args(["--router", locator])) == []
+
+
+def test_port_0_is_for_listening_only() -> None:
+    check_endpoint("tcp/127.0.0.1:0", "--listen", listen=True)
+    with pytest.raises(InvalidOptionError, match=r"--listen must .* port in 0\.\.65535"):
+        check_endpoint("tcp/127.0.0.1:65536", "--listen", listen=True)
+    with pytest.raises(InvalidOptionError, match=r"router must .* port in 1\.\.65535"):
+        check_endpoint("tcp/127.0.0.1:0")
