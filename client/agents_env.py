@@ -52,6 +52,7 @@ from neuronsmae.client.infos import start_info, step_info
 from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.spaces import face_contexts, per_agent_actions, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
+from neuronsmae.protocol.interface import seed_value
 
 
 class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Sequence[Any]]):
@@ -101,6 +102,7 @@ class AgentsEnv(EpisodeSpec, Recipe, gymnasium.Env[tuple[np.ndarray, ...], Seque
     ) -> tuple[tuple[np.ndarray, ...], dict[str, Any]]:
         """Start an episode; ``seed`` re-seeds the arena; ``options={"contexts": ...}`` as
         ``CoopEnv``'s."""
+        seed = None if seed is None else seed_value(seed)  # the arena's error, not Gymnasium's
         super().reset(seed=seed)
         contexts = reset_contexts(self.contexts, options)
         obs = self.arena.reset(contexts or None, self._first_seed(seed))

@@ -51,7 +51,7 @@ from neuronsmae.protocol.messages import (
     decode_reply,
     encode_request,
 )
-from neuronsmae.protocol.transport import check_host, check_locator
+from neuronsmae.protocol.transport import check_host, check_locator, check_tls
 
 CLOSE_TIMEOUT = 1.0
 """Seconds ``close`` waits for the server to acknowledge, so closing never hangs."""
@@ -74,9 +74,13 @@ def _shutdown(link: Link, server: ServerProcess | None, farewell: bytes) -> None
 
 def answering_pid(link: Link, session: str = "", timeout: float = PROBE_TIMEOUT) -> int | None:
     """The pid of the server answering a ping on ``link`` now, None while none answers
-    (used while a server starts, to tell the one launched from any other)."""
+    (used while a server starts, to tell the one launched from any other). A session that
+    cannot even be configured (an unusable ``NEURONSMAE_ZENOH_TLS`` file) raises its
+    InvalidOptionError: that is no "not answering yet"."""
     try:
         reply = decode_reply(link.call(encode_request(Ping(), session), timeout))
+    except InvalidOptionError:
+        raise
     except NeuronsMAEError:
         return None
     value = reply.value if isinstance(reply, OkReply) else None
@@ -127,6 +131,7 @@ class Connection:
         check_host(host)
         if router is not None:
             check_locator(router)
+        check_tls()  # a bad NEURONSMAE_ZENOH_TLS file: said now, not as "no server listens"
         self.host, self.router, self.timeout = host, router, float(timeout)
         self.session_id = uuid.uuid4().hex
         self.server: ServerProcess | None = None

@@ -50,6 +50,7 @@ from neuronsmae.client.source import ArenaSource, FirstSeed, Recipe, open_face
 from neuronsmae.client.spaces import Layout, face_contexts, reset_contexts
 from neuronsmae.client.viewer import HUMAN, RGB_ARRAY, Renderer, render_modes
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
+from neuronsmae.protocol.interface import seed_value
 
 ENV_ID = "NeuronsMAE/Coop-v0"
 AGENTS_ENV_ID = "NeuronsMAE/Agents-v0"
@@ -171,6 +172,7 @@ class CoopEnv(EpisodeSpec, Recipe, gymnasium.Env[np.ndarray, np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode; ``seed`` re-seeds the arena, as ``ArenaAPI.reset`` does."""
+        seed = None if seed is None else seed_value(seed)  # the arena's error, not Gymnasium's
         super().reset(seed=seed)
         contexts = reset_contexts(self.contexts, options)
         obs = self.arena.reset(contexts or None, self._first_seed(seed))

@@ -22,7 +22,13 @@ from neuronsmae.protocol.errors import (
     ServerError,
     error_from_code,
 )
-from neuronsmae.protocol.interface import Action, ArenaAPI, inherit_docstrings, plain_contexts
+from neuronsmae.protocol.interface import (
+    Action,
+    ArenaAPI,
+    inherit_docstrings,
+    plain_contexts,
+    seed_value,
+)
 from neuronsmae.protocol.launch import ServerCommand, check_launch, check_timeout, ports_of
 from neuronsmae.protocol.link import Link
 from neuronsmae.protocol.messages import (
@@ -135,8 +141,11 @@ class RM(ArenaAPI):
         self, contexts: Mapping[str, Any] | None = None, seed: int | None = None
     ) -> list[np.ndarray]:
         wire = plain_contexts(contexts)
+        # Checked here as Arena.reset checks it (same error, naming seed and the valid range):
+        # the wire would refuse it as a malformed message, or fail to encode it at all.
+        checked = None if seed is None else seed_value(seed)
         self._cache.clear()
-        reply = self._call(Reset(contexts=wire, seed=seed), InvalidContextError)
+        reply = self._call(Reset(contexts=wire, seed=checked), InvalidContextError)
         obs = list(reply.value)
         self._remember(obs, reply)
         return obs

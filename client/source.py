@@ -29,11 +29,11 @@ system's entropy, so unseeded copies play different episodes, unless a seed was 
 the constructor (``seed=``, or to the arena the caller built), which then decides every
 episode from the first one on.
 
-A one-arena face pickles as its recipe (:class:`Recipe`, Gymnasium's ``EzPickle``): unpickling
-builds a new environment from the same arguments (its own private server when served), not
-a copy of the running episode. That is how SuperSuit's ``concat_vec_envs_v1`` and others copy
-an environment. A face wrapping an arena object cannot be copied so; a ``"module:attr"``
-name or a factory can.
+A face pickles as its recipe (:class:`Recipe`, Gymnasium's ``EzPickle``): unpickling (or
+``copy.deepcopy``) builds a new environment from the same arguments (its own private server
+when served; the vector face its own vector servers), not a copy of the running episode.
+That is how SuperSuit's ``concat_vec_envs_v1`` and others copy an environment. A face
+wrapping an arena object cannot be copied so; a ``"module:attr"`` name or a factory can.
 """
 
 from __future__ import annotations
@@ -261,16 +261,26 @@ def open_face(
 class Recipe(EzPickle):
     """Pickled as the arguments a face was built with (Gymnasium's ``EzPickle``): a face
     calls ``Recipe.__init__(self, env=env, seed=seed, ...)`` with every argument it was given,
-    and unpickling builds a new face from them."""
+    and unpickling builds a new face from them (``copy.deepcopy`` too)."""
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Build a face from the recipe and take over what it opened. The face built here
+        is then emptied and marked closed: a Gymnasium ``VectorEnv`` closes itself when
+        collected, which would close the arenas (and stop the servers) now this one's."""
+        built = type(self)(*state["_ezpickle_args"], **state["_ezpickle_kwargs"])
+        self.__dict__.update(built.__dict__)
+        built.__dict__.clear()
+        built.__dict__["closed"] = True
 
     def __getstate__(self) -> dict[str, Any]:
         env = self._ezpickle_kwargs.get("env")
         if isinstance(env, (ArenaAPI, VecArenaAPI)):
+            name = "VecArena" if isinstance(env, VecArenaAPI) else "Arena"
             raise NotCopyableError(
                 f"{type(self).__name__}(env=<{type(env).__name__} object>) cannot be copied: "
                 "a copy is built anew from the constructor's arguments, and an arena object "
                 "cannot be; give env as None (a private server), a 'module:attr' name such as "
-                "'neuronsmae.server:Arena', or a factory"
+                f"'neuronsmae.server:{name}', or a factory"
             )
         return super().__getstate__()  # type: ignore[no-any-return]
 

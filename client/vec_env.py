@@ -36,19 +36,24 @@ from gymnasium.vector.utils import batch_space
 
 from neuronsmae.client.gym_env import ENV_ID, EpisodeSpec, _coop
 from neuronsmae.client.infos import start_info, step_info
-from neuronsmae.client.source import FirstSeed, open_vec_arena
+from neuronsmae.client.source import FirstSeed, Recipe, open_vec_arena
 from neuronsmae.client.spaces import Layout, face_contexts, reset_contexts
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import VecArenaAPI
 
 
-class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
+class CoopVectorEnv(EpisodeSpec, Recipe, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     """``num_envs`` cooperative arenas as one Gymnasium vector environment.
 
     Arguments are :class:`~neuronsmae.client.gym_env.CoopEnv`'s (``seed``, ``contexts``,
     ``env``, ``RM``'s and the arena options) plus ``num_envs``, and ``servers`` to spread the
     arenas over several private vector servers (one by default). ``render_mode`` must be
     None: vector servers do not render (render one ``CoopEnv`` instead).
+
+    Like the one-arena faces it pickles (and ``copy.deepcopy``-s) as its recipe: the copy is
+    built anew from the same arguments, launching vector servers of its own when served; one
+    wrapping a ``VecArenaAPI`` object raises
+    :class:`~neuronsmae.protocol.errors.NotCopyableError` (a ``TypeError``).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -66,6 +71,8 @@ class CoopVectorEnv(EpisodeSpec, VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
+        Recipe.__init__(self, num_envs=num_envs, env=env, seed=seed, contexts=contexts,
+                        render_mode=render_mode, **kwargs)  # fmt: skip
         if render_mode is not None:
             raise InvalidOptionError(
                 f"render_mode={render_mode!r}: a vector of served arenas does not render; "

@@ -11,7 +11,6 @@ its parent dies.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import ipaddress
 import math
@@ -31,7 +30,7 @@ import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
-from neuronsmae.protocol.transport import MAX_BUSY_POLL_US
+from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_tls
 
 STARTUP_TIMEOUT = 120.0
 """Seconds a launched server may take to answer (imports, JIT compiles, arena builds)."""
@@ -142,22 +141,43 @@ class ServerCommand:
 
 
 class ServerProcess:
-    """A server launched for one client, with its output kept in a temporary log file."""
+    """A server launched for one client, its output kept in an unnamed temporary file.
+
+    The file is unlinked as it is created (``tempfile.TemporaryFile``): it has no name in
+    the temporary directory, so nothing is left behind however either process ends. (A
+    named log, deleted by :meth:`stop`, stayed behind whenever the client was killed with
+    SIGKILL or left through ``os._exit``, as Ray does to its workers: one file per server.)
+    The kernel frees it when its last descriptor closes: this process's, kept until
+    :meth:`stop` for :meth:`log_tail` (the message of a server that fails to start), and the
+    server's stdout and stderr, kept until it exits, which it does by itself when this
+    process dies (``watch_parent``). While the server runs its output is readable at
+    ``/proc/<server pid>/fd/2``.
+    """
 
     def __init__(self, command: ServerCommand) -> None:
+        check_tls()  # the server would read the same NEURONSMAE_ZENOH_TLS file and just exit
         self.command = command
         self.port = command.port
-        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed in stop)
-            prefix=f"neuronsmae-server-{command.port}-", suffix=".log", delete=False
+        self._log = tempfile.TemporaryFile(  # noqa: SIM115 (closed in stop)
+            prefix=f"neuronsmae-server-{command.port}-", suffix=".log", buffering=0
         )
-        self.proc = command.spawn(self._log)
+        try:
+            self.proc = command.spawn(self._log)
+        except BaseException:
+            self._log.close()
+            raise
 
     def log_tail(self, limit: int = 2000) -> str:
-        """The end of the server's output, for error messages."""
-        with open(self._log.name, "rb") as f:
-            f.seek(0, os.SEEK_END)
-            f.seek(max(0, f.tell() - limit))
-            return f.read().decode(errors="replace").strip()
+        """The end of the server's output, for error messages ("" once stopped).
+
+        Read with ``pread``, at an explicit offset: the server's stdout shares this
+        descriptor's file offset, so a seek here would make it write over its own log."""
+        if self._log.closed:
+            return ""
+        fd = self._log.fileno()
+        size = os.fstat(fd).st_size
+        start = max(0, size - limit)
+        return os.pread(fd, size - start, start).decode(errors="replace").strip()
 
     def exited(self) -> int | None:
         """The exit status if the server has exited, else None."""
@@ -191,7 +211,8 @@ class ServerProcess:
         )
 
     def stop(self) -> None:
-        """SIGTERM the server, SIGKILL it if it lingers, and delete its log; idempotent."""
+        """SIGTERM the server, SIGKILL it if it lingers, and close its log (which frees it:
+        it has no name); idempotent."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
             try:
@@ -199,10 +220,7 @@ class ServerProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if not self._log.closed:
-            self._log.close()
-            with contextlib.suppress(OSError):
-                os.unlink(self._log.name)
+        self._log.close()
 
 
 def launch_private(

@@ -139,11 +139,14 @@ class Link:
         """Open the session if needed; False when nothing listens on the endpoint (or the
         router, when there is one: then only a query tells whether the server is there).
 
-        Raises :class:`ForkedZenohError` in a child forked after this process used Zenoh.
+        Raises :class:`ForkedZenohError` in a child forked after this process used Zenoh,
+        and :class:`~neuronsmae.protocol.errors.InvalidOptionError` when the
+        ``NEURONSMAE_ZENOH_TLS`` file cannot be used: the configuration is built outside the
+        "nothing listens" handling, since a bad file is not an absent server.
         """
         if self._session is None:
+            config = client_config(self.host, self.port, self.router)
             try:
-                config = client_config(self.host, self.port, self.router)
                 self._session = open_session(config, self.open_timeout)
             except (zenoh.ZError, ServerUnavailableError):
                 return False

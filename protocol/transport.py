@@ -14,7 +14,10 @@ TLS: when the environment variable ``NEURONSMAE_ZENOH_TLS`` names a Zenoh JSON5 
 ``transport.link.tls`` section of that file (CA, own certificate and key, ``enable_mtls``)
 is copied into every session opened here, so servers and clients can reach a router that
 accepts mutual TLS only (``deploy/zenoh-router-tls.json5``) at a ``tls/host:port`` locator.
-Nothing else of the file is used: endpoints and discovery stay as described above.
+Nothing else of the file is used: endpoints and discovery stay as described above. A file
+that cannot be used (missing, unreadable, invalid, no TLS settings) raises
+:class:`~neuronsmae.protocol.errors.InvalidOptionError` naming the variable and the file
+wherever a configuration is built, and clients check it before launching a server.
 """
 
 from __future__ import annotations
@@ -71,14 +74,58 @@ def endpoint(host: str, port: int) -> str:
     return f"tcp/{host}:{port}"
 
 
+def tls_section() -> str | None:
+    """The ``transport.link.tls`` section (as JSON) of the file ``NEURONSMAE_ZENOH_TLS``
+    names, or None when the variable is unset or empty.
+
+    Raises :class:`InvalidOptionError` naming the variable and the file when the file
+    cannot be used: missing, unreadable, a directory, not a Zenoh configuration, or with
+    nothing set under ``transport.link.tls`` (then the variable would change nothing, which
+    is never what setting it meant). Zenoh's own refusal (``No such file or directory (os
+    error 2)``) names neither, and surfaced as "no server listens" in a client.
+    """
+    path = os.environ.get(TLS_ENV)
+    if not path:
+        return None
+    valid = (
+        "it must name a readable Zenoh configuration file (.json5, .json or .yaml) whose "
+        "transport.link.tls section gives this process's CA, certificate and key "
+        "(root_ca_certificate, connect_certificate, connect_private_key, enable_mtls), "
+        "or be unset for plain TCP; see docs/reliability.md, 'Access'"
+    )
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise InvalidOptionError(
+            f"{TLS_ENV}={path!r} cannot be read ({exc.strerror or exc}); {valid}"
+        ) from exc
+    try:
+        tls = zenoh.Config.from_file(path).get_json("transport/link/tls")
+    except zenoh.ZError as exc:
+        raise InvalidOptionError(
+            f"{TLS_ENV}={path!r} is not a valid Zenoh configuration ({zenoh_message(exc)}); {valid}"
+        ) from exc
+    if tls == zenoh.Config().get_json("transport/link/tls"):
+        raise InvalidOptionError(
+            f"{TLS_ENV}={path!r} sets nothing under transport.link.tls; {valid}"
+        )
+    return tls
+
+
+def check_tls() -> None:
+    """Refuse an unusable ``NEURONSMAE_ZENOH_TLS`` file (see :func:`tls_section`) before
+    anything is launched: a server started with it would only exit, saying less."""
+    tls_section()
+
+
 def _base_config(mode: str) -> zenoh.Config:
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
-    tls_file = os.environ.get(TLS_ENV)
-    if tls_file:
-        tls = zenoh.Config.from_file(tls_file).get_json("transport/link/tls")
+    tls = tls_section()
+    if tls is not None:
         conf.insert_json5("transport/link/tls", tls)
     return conf
 
@@ -88,7 +135,8 @@ def server_config(host: str, port: int, routers: Sequence[str] = ()) -> zenoh.Co
 
     Routers (Zenoh locators such as ``tcp/10.0.0.1:7447``) let clients that cannot reach
     ``host:port`` query this server through them. A peer keeps retrying a router that is
-    not up yet, so servers and router may start in any order.
+    not up yet, so servers and router may start in any order. Raises InvalidOptionError
+    for an unusable ``NEURONSMAE_ZENOH_TLS`` file (:func:`tls_section`).
     """
     conf = _base_config("peer")
     conf.insert_json5("listen/endpoints", json.dumps([endpoint(host, port)]))
@@ -102,7 +150,8 @@ def client_config(host: str, port: int, router: str | None = None) -> zenoh.Conf
 
     In client mode ``zenoh.open`` fails at once when nothing listens there (which is how
     the client knows to launch a server) and, once open, the session reconnects by itself
-    when a server comes back on that endpoint.
+    when a server comes back on that endpoint. Raises InvalidOptionError for an unusable
+    ``NEURONSMAE_ZENOH_TLS`` file (:func:`tls_section`).
     """
     conf = _base_config("client")
     target = router or endpoint(host, port)

@@ -24,6 +24,7 @@ from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
     InvalidOptionError,
+    NeuronsMAEError,
     ResetNeededError,
     ServerUnavailableError,
 )
@@ -277,6 +278,32 @@ def test_rm_refuses_and_accepts_what_arena_does(server_a: Server) -> None:
         assert np.stack(got).tobytes() == np.stack(want).tobytes()
         with pytest.raises(InvalidContextError, match="'coef' must be a number"):
             env.reset({"coef": np.bool_(True)})
+    local.close()
+
+
+BAD_SEEDS = [2**63, 2**64 + 5, -1, True, 1.5, "3", np.uint64(2**64 - 1)]
+"""Reset seeds an arena refuses: out of [0, 2**63 - 1] (2**64 + 5 does not even fit the
+wire's integers), or not an integer."""
+
+
+def test_a_bad_reset_seed_is_refused_as_the_arena_refuses_it(server_a: Server) -> None:
+    """Served, 2**63 came back as the server's MalformedMessageError and 2**64 + 5 as
+    "cannot encode message: Integer value out of range", naming no seed. Now RM checks the
+    seed before sending, with the arena's own check: same type, same message."""
+    local = Arena(seed=4)
+    with RM(seed=4, port=server_a.port, launch=False, timeout=30) as env:
+        env.reset(seed=1)
+        for seed in BAD_SEEDS:
+            said = []
+            for arena in (env, local):
+                with pytest.raises(NeuronsMAEError) as caught:
+                    arena.reset(seed=seed)  # type: ignore[arg-type]
+                said.append((type(caught.value), str(caught.value)))
+            assert said[0] == said[1], seed
+            assert said[0][0] is InvalidContextError
+            assert "seed" in said[0][1] and "[0, 9223372036854775807]" in said[0][1]
+        top = np.uint64(2**63 - 1)  # the largest seed, as a NumPy integer: accepted by both
+        assert same(env.reset(seed=top), local.reset(seed=top))  # type: ignore[arg-type]
     local.close()
 
 

@@ -421,6 +421,39 @@ def test_check_env_over_rm_matches_in_process(start_server: Callable[..., Server
 
 
 @pytest.mark.slow
+def test_every_face_refuses_a_bad_reset_seed_as_the_arena_does(
+    start_server: Callable[..., Server],
+) -> None:
+    """Served, ``reset(seed=2**63)`` was the server's MalformedMessageError and
+    ``seed=2**64 + 5`` "cannot encode message: Integer value out of range"; in process it
+    was InvalidContextError naming seed and its range. The Gymnasium faces raised
+    Gymnasium's own ``Error`` for -1 and 1.5 (the PettingZoo face InvalidContextError). Now
+    every face, served or not, raises the arena's error, before anything is sent."""
+    from neuronsmae.client.agents_env import AgentsEnv
+    from neuronsmae.client.pz_env import ArenaParallelEnv
+
+    port = start_server().port
+    for face in (CoopEnv, AgentsEnv, ArenaParallelEnv):
+        for seed in (2**63, 2**64 + 5, -1, 1.5, True, np.int64(-3)):
+            said = []
+            for where in (
+                {"port": port, "launch": False, "timeout": RM_TIMEOUT},
+                {"env": IN_PROCESS},
+            ):
+                env = face(seed=1, **where, **SHORT)
+                try:
+                    with pytest.raises(Exception) as caught:
+                        env.reset(seed=seed)
+                    said.append((type(caught.value), str(caught.value)))
+                    env.reset(seed=np.int64(2**63 - 1))  # the largest seed, a NumPy integer
+                finally:
+                    env.close()
+            assert said[0] == said[1], (face.__name__, seed)
+            assert said[0][0] is InvalidContextError, (face.__name__, seed, said[0])
+            assert "seed" in said[0][1] and "[0, 9223372036854775807]" in said[0][1]
+
+
+@pytest.mark.slow
 def test_an_explicit_port_launches_a_server_there() -> None:
     port = free_port()
     env = gymnasium.make(ENV_ID, seed=3, port=port, timeout=RM_TIMEOUT, **SHORT)

@@ -265,6 +265,55 @@ def test_steps_in_flight_are_settled_before_rows_are_checked(
         assert not third.result()[2].any()
 
 
+def test_bad_reset_and_step_seeds_are_refused_as_vecarena_refuses_them(
+    start_server: Callable[..., Server],
+) -> None:
+    """Seeds are per-episode inputs, so a bad one is InvalidContextError, as Arena.reset's
+    (a wrong count too: it stays so). Served and in process say the same, before anything
+    is sent: 2**64 + 5 does not fit the wire's integers; the vector face follows VecRM."""
+    from neuronsmae.client import CoopVectorEnv
+
+    port = start_server("--arenas", "3").port
+    zeros = np.zeros((3, 2), np.int64)
+    calls: list[tuple[str, Callable[[Any], Any]]] = [
+        ("reset 2**64 + 5", lambda v: v.reset(seed=2**64 + 5)),
+        ("reset 2**63", lambda v: v.reset(seed=2**63)),
+        ("reset last + 2 > max", lambda v: v.reset(seed=2**63 - 2)),
+        ("reset [1, 2]", lambda v: v.reset(seed=[1, 2])),
+        ("reset entry", lambda v: v.reset(seed=[None, 2**64 + 5, None])),
+        ("step entry", lambda v: v.step(zeros, seeds=[None, None, -1])),
+        ("step huge", lambda v: v.step(zeros, seeds=[2**70, None, None])),
+    ]
+    served = VecRM(seed=0, port=port, num_envs=3, launch=False, timeout=60)
+    local = VecArena(seed=0, num_envs=3)
+    try:
+        for vec in (served, local):
+            vec.reset(seed=0)
+        for name, call in calls:
+            said = []
+            for vec in (served, local):
+                with pytest.raises(InvalidContextError) as caught:
+                    call(vec)
+                said.append(str(caught.value))
+            assert said[0] == said[1] and "seed" in said[0], name
+        assert served.step(zeros)[0].tobytes() == local.step(zeros)[0].tobytes()  # intact
+    finally:
+        served.close()
+        local.close()
+    faces = [CoopVectorEnv(3, seed=0, port=port, launch=False, timeout=60),
+             CoopVectorEnv(3, env="neuronsmae.server:VecArena", seed=0)]  # fmt: skip
+    try:
+        said = []
+        for face in faces:
+            with pytest.raises(InvalidContextError) as caught:
+                face.reset(seed=2**64 + 5)
+            said.append(str(caught.value))
+        assert said[0] == said[1] and "seed 18446744073709551621 is out of range" in said[0]
+    finally:
+        for face in faces:
+            face.close()
+
+
 def test_vector_seeds_and_counts_are_checked_like_vecarena() -> None:
     """``VecRM(seed=None)`` was a builtin TypeError and ``num_envs=np.int64(2)`` refused;
     both are checked before anything is launched."""

@@ -4,6 +4,9 @@ vector infos, and environment ``i`` playing exactly like a single ``CoopEnv`` se
 
 from __future__ import annotations
 
+import copy
+import gc
+import pickle
 from typing import Any
 
 import gymnasium
@@ -17,6 +20,7 @@ from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
     InvalidOptionError,
+    NotCopyableError,
 )
 from neuronsmae.server import VecArena
 
@@ -141,3 +145,59 @@ def test_arguments_are_checked() -> None:
         CoopVectorEnv(2, env="neuronsmae.server:VecArena", render_mode="rgb_array")
     with pytest.raises(InvalidOptionError, match="max_cycles"):
         gymnasium.make_vec(ENV_ID, num_envs=2, max_cycles=3)
+
+
+def _copies_play_alike(vec: CoopVectorEnv, copies: list[CoopVectorEnv]) -> None:
+    """Each copy is a new environment from the same arguments: its own arenas, the same
+    episodes for the same seed and actions (and the original keeps working)."""
+    gc.collect()  # the faces built while unpickling are gone: they must not close the copies'
+    obs = vec.reset(seed=9)[0]
+    zeros = np.zeros(vec.action_space.shape, dtype=np.int64)
+    stepped = vec.step(zeros)
+    for other in copies:
+        assert other.vec is not vec.vec and not other.closed
+        np.testing.assert_array_equal(other.reset(seed=9)[0], obs)
+        got = other.step(zeros)
+        for mine, theirs in zip(stepped[:4], got[:4], strict=True):
+            np.testing.assert_array_equal(mine, theirs)
+
+
+def test_the_vector_face_pickles_and_deepcopies_as_its_recipe() -> None:
+    """It was ``TypeError: cannot pickle '_io.BufferedRandom'`` (its servers' log files),
+    while the one-arena faces pickle as their recipe."""
+    vec = CoopVectorEnv(2, env="neuronsmae.server:VecArena", seed=3, **SHORT)
+    copies = [pickle.loads(pickle.dumps(vec)), copy.deepcopy(vec)]
+    try:
+        assert all(c.num_envs == 2 and c.layout.info == vec.layout.info for c in copies)
+        _copies_play_alike(vec, copies)
+    finally:
+        for env in (vec, *copies):
+            env.close()
+    held = CoopVectorEnv(2, env=VecArena(seed=0, num_envs=2, **SHORT))
+    try:
+        for how in (pickle.dumps, copy.deepcopy):
+            with pytest.raises(
+                NotCopyableError, match=r"env=<VecArena object>.*'neuronsmae.server:VecArena'"
+            ):
+                how(held)
+        assert isinstance(NotCopyableError("x"), TypeError)
+    finally:
+        held.close()
+
+
+@pytest.mark.slow
+def test_a_served_vector_face_copy_launches_its_own_server() -> None:
+    vec = CoopVectorEnv(2, seed=3, **SHORT)  # a private vector server
+    clone = pickle.loads(pickle.dumps(vec))
+    try:
+        assert clone.vec.ports != vec.vec.ports
+        servers = [vec.vec._conns[0].server, clone.vec._conns[0].server]
+        _copies_play_alike(vec, [clone])
+    finally:
+        clone.close()
+    assert servers[1].proc.poll() is not None and servers[0].proc.poll() is None
+    try:
+        vec.reset(seed=1)  # closing the copy left the original's server alone
+    finally:
+        vec.close()
+    assert servers[0].proc.poll() is not None
