@@ -134,8 +134,8 @@ class ReplayMismatchError(NeuronsMAEError):
 
 
 class ClosedError(NeuronsMAEError, RuntimeError):
-    """An in-process arena was used after ``close()``, which released its simulation: build
-    a new one."""
+    """An in-process arena (or a trainer) was used after ``close()``, which released its
+    simulation (or workers): build a new one."""
 
     code = "closed"
 

@@ -23,6 +23,7 @@ import difflib
 import inspect
 import itertools
 import json
+import numbers
 import os
 import sys
 import types
@@ -31,6 +32,8 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from neuronsmae.protocol.levels import LEVEL_ARGS
 from neuronsmae.trainers.config_groups import (
@@ -41,6 +44,7 @@ from neuronsmae.trainers.config_groups import (
     check_choice,
     check_finite,
     check_positive,
+    check_types,
     parse_resources,
 )
 from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
@@ -162,6 +166,7 @@ class TrainConfig:
     """Experiments, off by default (keys ``experimental.<name>``)."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_choice("alg", self.alg, sorted(ALGORITHMS))
         check_choice("level", self.level, LEVELS)
         fixed, self_play = parse_opponents(self.opponent)
@@ -196,9 +201,6 @@ class TrainConfig:
             raise ConfigError(
                 f"workers and max_minutes must be ≥ 0, got {self.workers} and {self.max_minutes}"
             )
-        for name, kind in GROUPS.items():
-            if not isinstance(getattr(self, name), kind):
-                raise ConfigError(f"{name} must be a {kind.__name__}")
 
     def _check_served_settings(self) -> None:
         """Refuse server settings where no server runs (env=inprocess would ignore them),
@@ -388,9 +390,10 @@ def _coerce(key: str, value: Any) -> Any:
                 raise ConfigError(f"{key} expects a whole number, got {value!r}")
             return int(number)
         return number
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+    number = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+    if kind is float and number:  # Python or NumPy
         return float(value)
-    if kind is int and isinstance(value, float) and value.is_integer():
+    if kind is int and number and float(value).is_integer():
         return int(value)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise ConfigError(f"{key} expects {kind.__name__}, got {value!r}")
@@ -455,8 +458,14 @@ def make_config(*layers: Mapping[str, Any], base: TrainConfig | None = None) -> 
 
     A layer's keys may be full, bare or group tables (a saved ``config.json`` is one layer).
     """
+    if base is not None and not isinstance(base, TrainConfig):
+        raise ConfigError(f"base must be a TrainConfig, got {type(base).__name__}")
     values = (base or TrainConfig()).to_dict()
     for i, layer in enumerate(layers):
+        if not isinstance(layer, Mapping):
+            raise ConfigError(
+                f"layer {i} must be a mapping of config keys, got {type(layer).__name__}"
+            )
         for key, value in flatten(layer, f"layer {i}").items():
             group, _, name = key.rpartition(".")
             (values[group] if group else values)[name] = _coerce(key, value)

@@ -9,10 +9,17 @@ groups, as the bare ``lr`` (:mod:`neuronsmae.trainers.config`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import numbers
+import os
+import types
+import typing
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.messages import MAX_SEED
@@ -57,6 +64,59 @@ def check_finite(owner: object) -> None:
         value = getattr(owner, f.name)
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{f.name} must be a finite number, got {value}")
+
+
+_WRONG = object()
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def check_types(owner: object) -> None:
+    """Raise :class:`ConfigError` unless every field of ``owner`` holds its annotated type.
+
+    A config built directly (``TrainConfig(episodes=4.5)``, ``dataclasses.replace``) is
+    checked as :func:`~neuronsmae.trainers.config.make_config` checks its layers: an int
+    field takes a whole Python or NumPy number, a float field any real number (stored as a
+    float), a str field a path too (stored as a str), a bool field only a bool.
+    """
+    for f in dataclasses.fields(owner):  # type: ignore[arg-type]
+        kind, value = _hints(type(owner))[f.name], getattr(owner, f.name)
+        if isinstance(kind, types.UnionType):
+            if value is None and type(None) in typing.get_args(kind):
+                continue
+            kind = next(a for a in typing.get_args(kind) if a is not type(None))
+        typed = _typed(value, kind)
+        if typed is _WRONG:
+            name = getattr(kind, "__name__", str(kind))
+            got = f"{value!r:.80} ({type(value).__name__})"
+            raise ConfigError(f"{f.name} expects {name}, got {got}")
+        if typed is not value:
+            object.__setattr__(owner, f.name, typed)
+
+
+def _typed(value: Any, kind: Any) -> Any:
+    """``value`` as a ``kind`` field holds it, or ``_WRONG``."""
+    if kind is bool:
+        return bool(value) if isinstance(value, (bool, np.bool_)) else _WRONG
+    if isinstance(value, (bool, np.bool_)):
+        return _WRONG  # not a number, nor a name
+    if kind is int:
+        if isinstance(value, numbers.Integral):
+            return int(value)
+        whole = isinstance(value, numbers.Real) and float(value).is_integer()
+        return int(value) if whole else _WRONG
+    if kind is float:
+        return float(value) if isinstance(value, numbers.Real) else _WRONG
+    if kind is str:
+        if isinstance(value, str):
+            return value
+        return os.fspath(value) if isinstance(value, os.PathLike) else _WRONG
+    if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+        return value if isinstance(value, kind) else _WRONG
+    return value  # other annotations are checked by the field's own rule
 
 
 def parse_resources(text: str) -> dict[str, float]:
@@ -149,13 +209,14 @@ class LearnerConfig:
     batch_size: int = 32
     """Episodes per gradient update, in [1, buffer_size]."""
     learning_starts: int = 64
-    """Episodes in the buffer before learning begins, ≥ 0."""
+    """Episodes in the buffer before learning begins, in [0, buffer_size]."""
     train_every: int = 1
     """Asynchronous mode: episodes collected between training rounds."""
     updates_per_round: int = 2
     """Gradient updates per training round (per iteration in synchronous mode)."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_choice("features", self.features, (*FEATURES, "auto"))
         check_choice("head", self.head, ("flat", "points", "auto"))
         if self.head == "points" and self.features not in (*POINT_FEATURES, "auto"):
@@ -181,6 +242,11 @@ class LearnerConfig:
         if self.batch_size > self.buffer_size:
             raise ConfigError(
                 f"batch_size must be in [1, buffer_size={self.buffer_size}], got {self.batch_size}"
+            )
+        if self.learning_starts > self.buffer_size:  # the buffer would never hold that many
+            raise ConfigError(
+                f"learning_starts must be in [0, buffer_size={self.buffer_size}], got "
+                f"{self.learning_starts}"
             )
         for name in ("lr", "grad_clip"):
             if getattr(self, name) <= 0:
@@ -224,6 +290,7 @@ class EvalConfig:
     ``coef=1.5``."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_positive(self, "eval_episodes", "final_eval_episodes", "checkpoint_every")
         for name, spec in self.context_specs().items():
             if not spec.fixed:
@@ -303,6 +370,7 @@ class ClusterConfig:
     instead; the servers run outside Ray (neuronsmae-serve --router). See deploy/README.md."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_choice("servers", self.servers, SERVER_PLACEMENTS)
         parse_resources(self.worker_resources)
         parse_resources(self.server_resources)

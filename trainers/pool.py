@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
-from neuronsmae.trainers.config_groups import ConfigError
+from neuronsmae.trainers.config_groups import ConfigError, check_types
 
 SELF = "self"
 """The ``--opponent`` entry that adds the learner's own snapshots to the pool."""
@@ -119,6 +119,7 @@ class SelfPlayConfig:
     snapshots from ⌊δ·v⌋ to the latest v; 0 is the whole history, 1 the latest only."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         if self.snapshot_every < 1:
             raise ConfigError(f"selfplay.snapshot_every must be ≥ 1, got {self.snapshot_every}")
         if not 0.0 <= self.delta <= 1.0:

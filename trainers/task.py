@@ -24,7 +24,7 @@ from typing import Any
 
 from neuronsmae.client.source import ARENA_OPTIONS
 from neuronsmae.protocol.env_info import EnvInfo
-from neuronsmae.trainers.config_groups import ConfigError, LearnerConfig, check_choice
+from neuronsmae.trainers.config_groups import ConfigError, LearnerConfig, check_choice, check_types
 from neuronsmae.trainers.symmetry import GENERATORS, parse_generators
 
 Q_ACTION_SPACES = ("abstract", "discrete")
@@ -101,6 +101,7 @@ class ArenaGroup:
     ``gui``, ``blue_level`` and the seed are the trainer's."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         refuse_continuous(self.action_space, "arena.action_space")
         check_choice("arena.observability", self.observability, OBSERVABILITY)
         check_choice("arena.reward", self.reward, REWARDS)

@@ -39,6 +39,7 @@ import torch
 
 from neuronsmae.protocol import EnvInfo, InvalidContextError
 from neuronsmae.protocol.contexts import check_contexts
+from neuronsmae.protocol.errors import ClosedError
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.agent import epsilon_at
 from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer, ReplayMemoryError
@@ -52,7 +53,7 @@ from neuronsmae.trainers.checkpoint import (
     save_checkpoint,
 )
 from neuronsmae.trainers.competition import Competition
-from neuronsmae.trainers.config import ConfigError, TrainConfig
+from neuronsmae.trainers.config import ConfigError, TrainConfig, check_resumable, make_config
 from neuronsmae.trainers.config_groups import TEST_SEED_OFFSET
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
@@ -124,6 +125,9 @@ class Trainer:
         self._check_contexts(workers=False)
         self.resumed_steps: int | None = None
         """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
+        self.recorder: Recorder | None = None
+        self.closed = False
+        """Set by :meth:`close`: a trainer runs once."""
         self.lock = RunLock(self.run_dir)
         try:
             saved = self._resumable() if resume else None
@@ -133,17 +137,15 @@ class Trainer:
             self.lock.release()
             raise
         self.owns_ray = not ray.is_initialized()
-        if self.owns_ray:
-            start_ray(cfg)
         try:
+            if self.owns_ray:
+                start_ray(cfg)
             self._build(cfg)
             if saved is not None:
                 self._resume(saved)
         except BaseException:
             self.close()
             raise
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
         self.recent: deque[Episode] = deque(maxlen=100)
         self.last_stats: dict[str, float] = {}
         self.evals: list[dict[str, Any]] = []
@@ -208,6 +210,7 @@ class Trainer:
     def _resumable(self) -> dict[str, Any]:
         """The checkpoint to resume from, refused if its run has nothing left to do."""
         payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
+        check_resumable(make_config(payload["config"]), self.cfg)  # as neuronsmae-train does
         done = payload["counters"]["episodes"]
         if payload.get("finished") and done >= self.cfg.episodes:
             raise ConfigError(
@@ -248,24 +251,25 @@ class Trainer:
         if self.owns_ray and ray.is_initialized():
             ray.shutdown()
         self.lock.release()
+        self.closed = True
 
     # --- the loop ----------------------------------------------------------------------
     def run(self) -> dict[str, Any]:
-        """Train until ``cfg.episodes``, then evaluate greedily; return the final figures."""
+        """Train until ``cfg.episodes``, then evaluate greedily; return the final figures.
+        A trainer runs once: its workers are gone afterwards (``ClosedError``)."""
+        if self.closed:
+            raise ClosedError(
+                "this Trainer has run or been closed: build a new one for a new run, or "
+                "Trainer(cfg, resume=True) to continue this one"
+            )
         cfg = self.cfg
-        self.recorder = Recorder(
-            self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress,
-            cfg.max_minutes * 60, self.resumed_steps,
-        )  # fmt: skip
-        self.session_start = time.perf_counter()
-        self.session_steps = 0
-        self.wall_base = self.counters.wall_seconds
-        self.sampler.broadcast(self._policy())
-        if self.competition.pool.snapshot_due(0, 0):  # the first snapshot: the start weights
-            self._snapshot()
-        elif self.competition.pool.has_policies:
-            self.sampler.broadcast_opponents(self.competition.policies())
         try:
+            (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
+            self.recorder = Recorder(
+                self.run_dir, cfg.episodes, self.counters.episodes, cfg.progress,
+                cfg.max_minutes * 60, self.resumed_steps,
+            )  # fmt: skip
+            self._start_session()
             with self.stop:
                 self._run_sync() if cfg.sync else self._run_async()
             self.checkpoint()
@@ -279,7 +283,8 @@ class Trainer:
             best = self._evaluate_best()
             self.checkpoint(finished=True)
         finally:
-            self.recorder.close()
+            if self.recorder is not None:
+                self.recorder.close()
             self.close()
         return {
             "final": final,
@@ -290,6 +295,17 @@ class Trainer:
             "start_replays": self.starts.replays,
             "run_dir": str(self.run_dir),
         }
+
+    def _start_session(self) -> None:
+        """This session's clocks, and the workers' first weights and opponents."""
+        self.session_start = time.perf_counter()
+        self.session_steps = 0
+        self.wall_base = self.counters.wall_seconds
+        self.sampler.broadcast(self._policy())
+        if self.competition.pool.snapshot_due(0, 0):  # the first snapshot: the start weights
+            self._snapshot()
+        elif self.competition.pool.has_policies:
+            self.sampler.broadcast_opponents(self.competition.policies())
 
     def _more(self) -> bool:
         """Episodes left to play, in this session wall-clock budget left, and no stop asked."""

@@ -139,6 +139,11 @@ def test_set_overrides_are_typed_and_bare_names_find_their_group() -> None:
         (["agent_hidden=4097"], r"agent_hidden must be in \[1, 4096\], got 4097"),
         (["hypernet_hidden=100000"], r"hypernet_hidden must be in \[1, 4096\]"),
         (["buffer_size=10", "batch_size=11"], r"batch_size must be in \[1, buffer_size=10\]"),
+        # the learner never trained: the buffer cannot hold that many episodes
+        (
+            ["buffer_size=2", "batch_size=1", "learning_starts=3"],
+            r"learning_starts must be in \[0, buffer_size=2\], got 3",
+        ),
     ],
 )
 def test_bad_overrides_are_errors(items: list[str], message: str) -> None:
@@ -317,7 +322,7 @@ def test_values_out_of_range_are_errors() -> None:
         LearnerConfig(lr=0.0)
     with pytest.raises(ConfigError, match="gamma must lie in"):
         make_config({"gamma": 1.5})
-    with pytest.raises(ConfigError, match="learner must be a LearnerConfig"):
+    with pytest.raises(ConfigError, match="learner expects LearnerConfig"):
         TrainConfig(learner={"lr": 1.0})  # type: ignore[arg-type]
 
 
@@ -516,3 +521,41 @@ def test_an_out_that_cannot_be_a_directory_is_refused_before_the_run(
     # a NotADirectoryError traceback once Ray and the workers had started
     assert main(["--out", str(tmp_path / "file" / "sub"), "--episodes", "1"]) == 2
     assert "cannot be created: Not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("fields", "said"),
+    [({"progress": "no"}, "progress expects bool, got 'no' (str)"),  # the bar came on
+     ({"episodes": 4.5}, "episodes expects int, got 4.5"),
+     ({"seed": "1"}, "seed expects int, got '1'"),  # a TypeError inside a range check
+     ({"out": 5}, "out expects str, got 5")],
+)  # fmt: skip
+def test_a_config_built_directly_is_checked_like_make_config(fields: dict, said: str) -> None:
+    from neuronsmae.trainers.config import TrainConfig
+
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        TrainConfig(**fields)
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        dataclasses.replace(make_config({}), **fields)
+
+
+def test_numpy_numbers_and_paths_are_taken_as_plain_values() -> None:
+    import numpy as np
+
+    cfg = dataclasses.replace(make_config({"lr": np.float32(1e-3), "episodes": np.int64(9)}),
+                              out=Path("runs") / "x")  # fmt: skip
+    assert (cfg.episodes, cfg.out) == (9, "runs/x") and type(cfg.learner.lr) is float
+    assert json.loads(json.dumps(cfg.to_dict()))["out"] == "runs/x"  # config.json is written
+
+
+@pytest.mark.parametrize(
+    ("layers", "base", "said"),
+    [((None,), None, "layer 0 must be a mapping of config keys, got NoneType"),
+     (({}, [1]), None, "layer 1 must be a mapping"),
+     (({},), {"lr": 1}, "base must be a TrainConfig, got dict")],
+)  # fmt: skip
+def test_make_config_names_a_layer_that_is_no_mapping(
+    layers: tuple, base: object, said: str
+) -> None:
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        make_config(*layers, base=base)  # type: ignore[arg-type]

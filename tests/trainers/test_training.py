@@ -21,7 +21,6 @@ import ray
 import torch
 
 from neuronsmae.trainers.buffer import Batch, Episode
-from neuronsmae.trainers.checkpoint import CheckpointError
 from neuronsmae.trainers.cli import main
 from neuronsmae.trainers.config import ConfigError, make_config, preset
 from neuronsmae.trainers.contexts import ContextSpec
@@ -71,9 +70,9 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     assert second["counters"]["episodes"] == 12
     assert second["counters"]["updates"] > first["counters"]["updates"]
     assert second["counters"]["env_steps"] > first["counters"]["env_steps"]
-    # From Python no CLI check runs first: the checkpoint's networks must fit, by name.
+    # From Python as from the command line, a resumed run keeps what shapes its networks.
     other = make_config(second["config"], {"alg": "vdn", "episodes": 16, "progress": False})
-    with pytest.raises(CheckpointError, match="its networks do not fit this config"):
+    with pytest.raises(ConfigError, match="this changes alg 'qmix' -> 'vdn'"):
         Trainer(other, resume=True)
 
     # The match command plays the checkpoint through the registered policy entry point.
@@ -389,3 +388,44 @@ def test_a_crashed_then_stopped_run_resumes_with_every_episode_recorded_once(
     assert evals == sorted(evals) and evals.count(8) == 1
     with pytest.raises(ConfigError, match="finished its 16 episodes"):
         Trainer(cfg, resume=True)
+
+
+def test_a_trainer_runs_once_and_one_that_never_ran_leaves_no_run_behind(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from neuronsmae.protocol.errors import ClosedError
+    from neuronsmae.trainers import train as train_module
+    from neuronsmae.trainers.records import RunLock
+
+    cfg = make_config(
+        dict(kv.split("=") for kv in TINY),
+        {"alg": "vdn", "workers": 1, "episodes": 2, "out": str(tmp_path), "progress": False},
+    )
+    looked = Trainer(cfg)  # built to inspect its networks, then closed unused
+    assert looked.spec.n_actions > 0
+    looked.close()
+    assert not (tmp_path / "config.json").exists()  # the folder still takes a new run
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(train_module, "Recorder", broken)
+    failing = Trainer(make_config(cfg.to_dict(), {"out": str(tmp_path / "failing")}))
+    with pytest.raises(OSError, match="disk full"):
+        failing.run()  # the workers and the run's lock are released all the same
+    assert failing.closed and not any(failing.sampler.actors)
+    RunLock(tmp_path / "failing").release()
+    monkeypatch.undo()
+
+    trainer = Trainer(cfg)
+    trainer.run()
+    finished = (tmp_path / "checkpoint.pt").read_bytes()
+    with pytest.raises(ClosedError, match="has run or been closed"):
+        trainer.run()  # it restarted Ray and rewrote the checkpoint as unfinished
+    assert (tmp_path / "checkpoint.pt").read_bytes() == finished
+
+    # From Python, as from the command line: a resumed run keeps what shapes its networks.
+    other = make_config(cfg.to_dict(), {"alg": "iql", "episodes": 4})
+    with pytest.raises(ConfigError, match="alg 'vdn' -> 'iql'"):
+        Trainer(other, resume=True)
+    assert json.loads((tmp_path / "config.json").read_text())["alg"] == "vdn"

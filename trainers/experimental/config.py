@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from neuronsmae.trainers.config_groups import ConfigError
+from neuronsmae.trainers.config_groups import ConfigError, check_types
 
 
 @dataclass(frozen=True)
@@ -29,6 +29,7 @@ class ExperimentalConfig:
     policy)."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         if not 0.0 <= self.start_replay <= 1.0:
             raise ConfigError(f"start_replay must lie in [0, 1] (0 = off), got {self.start_replay}")
         if self.start_replay_plays < 2 or self.start_replay_capacity < 1:
