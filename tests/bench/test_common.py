@@ -156,3 +156,18 @@ def test_the_commit_is_the_checkout_s_wherever_the_command_runs(
     assert commit() == here and len(here) == 40
     monkeypatch.setenv("NEURONSMAE_COMMIT", "abc123")  # a git-archive snapshot
     assert commit() == "abc123"
+
+
+def test_the_snapshot_reads_the_calling_thread_to_the_microsecond() -> None:
+    """The scheduler refreshes a running thread's schedstat only at its next tick: read
+    there, the thread taking the snapshot lagged by up to a tick (1-3 % of a round)."""
+    from bench.common import cpu_between, cpu_snapshot
+
+    me = psutil.Process()
+    errors = []
+    for _ in range(10):
+        before, start = cpu_snapshot([me]), time.thread_time()
+        sum(i * i for i in range(200_000))  # ~10 ms on the CPU, no clock read inside
+        after, end = cpu_snapshot([me]), time.thread_time()
+        errors.append(abs(cpu_between(before, after, main=True) - (end - start)))
+    assert max(errors) < 2e-4
