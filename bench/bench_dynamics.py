@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.common import machine, table, write_json
+from bench.common import Distinct, machine, table, write_json
 from neuronsmae.server import Arena
 from neuronsmae.server.contexts import DYNAMICS_KEYS
 
@@ -186,7 +186,9 @@ COLUMNS = [
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--keys", nargs="*", default=list(VALUES), choices=list(VALUES))
+    parser.add_argument(
+        "--keys", nargs="+", action=Distinct, default=list(VALUES), choices=list(VALUES)
+    )
     args = parser.parse_args()
     defaults = {k.name: k.default for k in DYNAMICS_KEYS}
     assert set(VALUES) == set(defaults)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pybullet as pb
 
-from bench.common import at_least, machine, positive, rate, table, write_json
+from bench.common import at_least, finite, machine, rate, table, write_json
 from neuronsmae.server import Arena
 from neuronsmae.server.config import ArenaConfig
 from neuronsmae.server.sim.field import PHYSICS_DT
@@ -130,9 +130,17 @@ def render_runner(seed: int = 0):
     return one
 
 
+MIN_SECONDS = 0.05
+"""Shortest measuring time: long enough for every configuration to play a decision (a
+nanosecond played none and divided by zero)."""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=positive, default=3.0)
+    parser.add_argument(
+        "--seconds", type=finite(MIN_SECONDS), default=3.0,
+        help=f"measuring time per configuration and repeat, ≥ {MIN_SECONDS} s",
+    )  # fmt: skip
     parser.add_argument("--repeats", type=at_least(1), default=5)
     args = parser.parse_args()
     runners = bare_runners() | {name: arena_runner(opts) for name, opts in CONFIGS.items()}

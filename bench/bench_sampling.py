@@ -1,6 +1,6 @@
 """Sampling throughput: the trainers' rollout workers against the bare arena, same run.
 
-    python -m bench.bench_sampling [--envs 1 8] [--workers 1 2] [--groups 1 2] [--servers 1 2]
+    python -m bench.bench_sampling [--envs 1 8] [--workers 1 2] [--groups 1] [--servers 1 2]
                                    [--seconds 10] [--repeats 3]
 
 What a learner sees: env steps (decisions) per second of *finished episodes*, policy
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import ray
 
-from bench.common import arena_count, at_least, machine, positive, table, write_json
+from bench.common import Distinct, arena_count, at_least, machine, positive, table, write_json
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.server import Arena
 from neuronsmae.trainers.learner import EnvSpec, agent_spec
@@ -112,17 +112,29 @@ def ray_round(sampler: Sampler, seconds: float, seed: int) -> float:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--envs", type=arena_count, nargs="+", default=[1, 8])
-    parser.add_argument("--workers", type=at_least(1), nargs="+", default=[1, 2])
-    parser.add_argument("--env", nargs="+", choices=ENV_KINDS, default=list(ENV_KINDS))
+    parser.add_argument("--envs", type=arena_count, nargs="+", action=Distinct, default=[1, 8])
+    parser.add_argument("--workers", type=at_least(1), nargs="+", action=Distinct, default=[1, 2])
+    parser.add_argument(
+        "--env", nargs="+", action=Distinct, choices=ENV_KINDS, default=list(ENV_KINDS)
+    )
     parser.add_argument("--seconds", type=positive, default=10.0)
     parser.add_argument("--repeats", type=at_least(1), default=3)
     parser.add_argument("--worker-cpus", type=positive, default=0.5)
     parser.add_argument(
-        "--groups", type=at_least(1), nargs="+", default=[1], help="served rows (1)"
+        "--groups",
+        type=at_least(1),
+        nargs="+",
+        action=Distinct,
+        default=[1],
+        help="served rows (1)",
     )
     parser.add_argument(
-        "--servers", type=at_least(1), nargs="+", default=[1, 2], help="served rows"
+        "--servers",
+        type=at_least(1),
+        nargs="+",
+        action=Distinct,
+        default=[1, 2],
+        help="served rows",
     )
     return parser
 
@@ -136,6 +148,12 @@ def _args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(
             f"--servers must not exceed --envs in a served row (a server holds at least one "
             f"arena): got --servers {max(args.servers)} with --envs {min(served)}"
+        )
+    if served and max(args.groups) > min(served):
+        parser.error(
+            f"--groups must not exceed --envs in a served row (a group holds at least one "
+            f"arena; the row would be labelled with groups it does not have): got --groups "
+            f"{max(args.groups)} with --envs {min(served)}"
         )
     return args
 

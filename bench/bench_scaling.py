@@ -36,6 +36,7 @@ import psutil
 
 from bench.common import (
     MAX_PORT,
+    Distinct,
     arena_count,
     at_least,
     machine,
@@ -46,6 +47,7 @@ from bench.common import (
     write_json,
 )
 from neuronsmae.client import VecRM
+from neuronsmae.server.serving.rpc import PortInUseError, check_port
 from neuronsmae.server.serving.supervisor import Fleet, FleetSpec
 
 OPTIONS: dict[str, Any] = {
@@ -166,17 +168,28 @@ def projection(rows: list[dict]) -> list[dict]:
 
 
 def check_ports(parser: argparse.ArgumentParser, base_port: int, counts: list[int]) -> None:
-    """Refuse a fleet whose last port, ``base_port + max(counts) - 1``, is past the last."""
-    if counts and base_port + max(counts) - 1 > MAX_PORT:
+    """Refuse a fleet whose last port, ``base_port + max(counts) - 1``, is past the last,
+    or one of whose ports something already listens on (checked now, not when that
+    fleet starts, minutes into the run)."""
+    if not counts:
+        return
+    if base_port + max(counts) - 1 > MAX_PORT:
         parser.error(
             f"--base-port {base_port} with --counts up to {max(counts)} puts servers past "
             f"port {MAX_PORT}"
         )
+    for port in range(base_port, base_port + max(counts)):
+        try:
+            check_port("127.0.0.1", port)
+        except PortInUseError as exc:
+            parser.error(f"--base-port {base_port}: {exc}; pick another --base-port")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--counts", type=at_least(1), nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument(
+        "--counts", type=at_least(1), nargs="+", action=Distinct, default=[1, 2, 4, 8]
+    )
     parser.add_argument("--envs", type=arena_count, default=8, help="arenas per server (8)")
     parser.add_argument("--seconds", type=positive, default=8.0)
     parser.add_argument("--repeats", type=at_least(1), default=3)

@@ -37,6 +37,7 @@ import numpy as np
 import psutil
 
 from bench.common import (
+    Distinct,
     at_least,
     cpu_between,
     cpu_by_thread,
@@ -189,6 +190,7 @@ def main() -> None:
         "--busy-poll-us",
         type=finite(0.0, MAX_BUSY_POLL_US),
         nargs="*",
+        action=Distinct,
         default=[2000.0],
         help="also measure servers that poll this many µs for the next request (2000); "
         "the plain server (0) is always measured",

@@ -37,6 +37,7 @@ import psutil
 
 from bench.bench_transport import compare
 from bench.common import (
+    Distinct,
     arena_count,
     at_least,
     cpu_between,
@@ -141,7 +142,9 @@ def _row(k: int, runs: dict[str, list[Any]], idle_mb: float, played_mb: float) -
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--envs", type=arena_count, nargs="+", default=[1, 4, 8, 16])
+    parser.add_argument(
+        "--envs", type=arena_count, nargs="+", action=Distinct, default=[1, 4, 8, 16]
+    )
     parser.add_argument(
         "--steps", type=at_least(1), default=40, help="vector steps per round at K=8"
     )

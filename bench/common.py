@@ -43,10 +43,11 @@ CpuSnapshot = dict[tuple[int, int], float]
 
 def rate(fn: Callable[[], int], seconds: float, repeats: int) -> dict[str, float]:
     """Run ``fn`` (which returns how many units it did) for ``seconds`` per repeat, ``repeats``
-    times; return the median, min and max rate in units per second."""
+    times (at least one call each); return the median, min and max rate in units per second."""
     rates = []
     for _ in range(repeats):
-        done, start = 0, time.perf_counter()
+        start = time.perf_counter()
+        done = fn()
         while time.perf_counter() - start < seconds:
             done += fn()
         rates.append(done / (time.perf_counter() - start))
@@ -56,6 +57,24 @@ def rate(fn: Callable[[], int], seconds: float, repeats: int) -> dict[str, float
         "max": max(rates),
         "repeats": repeats,
     }
+
+
+class Distinct(argparse.Action):
+    """An ``nargs`` option whose values are each given once: a repeat would be measured
+    (or run) twice and reported as two rows."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        values = list(values or [])
+        repeated = [v for i, v in enumerate(values) if v in values[:i]]
+        if repeated:
+            parser.error(f"{option_string} gives {repeated[0]} twice: give each value once")
+        setattr(namespace, self.dest, values)
 
 
 def _integer(text: str) -> int:

@@ -350,6 +350,8 @@ def main() -> int:
     parser.add_argument("--repeats", type=at_least(1), default=3)
     parser.add_argument("--skip", nargs="*", default=[], choices=["servers", "ray", "learner"])
     args = parser.parse_args()
+    if {"servers", "ray", "learner"} <= set(args.skip):
+        parser.error("--skip leaves no part to run: skip at most two of servers, ray, learner")
     report: dict[str, Any] = {"machine": machine(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     ok = True
     with tempfile.TemporaryDirectory() as tmp:

@@ -38,11 +38,12 @@ import numpy as np
 import zenoh
 
 from bench.common import (
+    Distinct,
     arena_count,
     at_least,
+    finite,
     free_port,
     machine,
-    positive,
     same,
     start_server,
     table,
@@ -433,9 +434,17 @@ def main() -> int:
         "--payloads", type=at_least(1), default=20_000, help="per phase 1; phase 2: /4"
     )
     parser.add_argument("--seed", type=at_least(0), default=0)
-    parser.add_argument("--timeout", type=positive, default=5.0, help="seconds per query")
     parser.add_argument(
-        "--arenas", type=arena_count, nargs="+", default=[1, 3], help="one campaign per server size"
+        "--timeout", type=finite(0.5), default=5.0,
+        help="seconds per query, ≥ 0.5 (the slowest hostile payload takes about 0.5 s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--arenas",
+        type=arena_count,
+        nargs="+",
+        action=Distinct,
+        default=[1, 3],
+        help="one campaign per server size",
     )
     args = parser.parse_args()
     t0 = time.perf_counter()

@@ -32,6 +32,7 @@ import zenoh
 
 from bench.bench_scaling import check_ports, measure
 from bench.common import (
+    Distinct,
     arena_count,
     at_least,
     free_port,
@@ -207,7 +208,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--clients", type=at_least(1), default=8)
     parser.add_argument("--decisions", type=at_least(1), default=2000)
-    parser.add_argument("--counts", type=at_least(1), nargs="*", default=[1, 2, 4, 8])
+    parser.add_argument(
+        "--counts", type=at_least(1), nargs="*", action=Distinct, default=[1, 2, 4, 8]
+    )
     parser.add_argument("--envs", type=arena_count, default=1, help="arenas per server in part 2")
     parser.add_argument("--seconds", type=positive, default=8.0)
     parser.add_argument("--repeats", type=at_least(1), default=1)

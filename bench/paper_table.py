@@ -50,7 +50,8 @@ from typing import Any
 
 from scipy import stats
 
-from bench.common import at_least, commit, non_negative
+from bench.common import Distinct, at_least, commit, non_negative
+from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import (
     ConfigError,
@@ -347,9 +348,9 @@ def _retests(done: list[dict[str, Any]]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--learner", choices=("paper", "defaults"), default="paper")
-    p.add_argument("--algs", nargs="+", choices=ALGS, default=None)
-    p.add_argument("--levels", nargs="+", choices=LEVELS, default=list(LEVELS))
-    p.add_argument("--seeds", nargs="+", type=at_least(0), default=[1, 2, 3])
+    p.add_argument("--algs", nargs="+", action=Distinct, choices=ALGS, default=None)
+    p.add_argument("--levels", nargs="+", action=Distinct, choices=LEVELS, default=list(LEVELS))
+    p.add_argument("--seeds", nargs="+", action=Distinct, type=at_least(0), default=[1, 2, 3])
     p.add_argument("--workers", type=at_least(0), default=2, help="rollout workers (0: auto)")
     p.add_argument("--env", choices=("inprocess", "remote"), default="inprocess")
     p.add_argument(
@@ -374,7 +375,9 @@ def main(argv: list[str] | None = None) -> int:
         cell_config(args, "vdn", args.levels[0], args.seeds[0], args.runs)  # the --set keys
     except (TableFileError, ConfigError) as exc:
         p.error(str(exc))
-    if args.test_at:
+    if args.report and args.test_at is not None:
+        p.error("--report and --test-at are alternatives: give one")
+    if args.test_at is not None:
         print(f"{test_at(args, args.test_at)} record(s) tested at {args.test_at}")
         return 0
     if args.report:
@@ -406,10 +409,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def fixed_contexts(text: str) -> str:
-    """``--test-at``'s value, checked: contexts with one fixed value each."""
+    """``--test-at``'s value, checked: contexts with one fixed value each, at least one,
+    each a key and value the arena takes (the protocol's context table)."""
     try:
-        ContextSpec.parse(text).value()
-    except ValueError as exc:  # ContextSpecError, naming the entry
+        values = ContextSpec.parse(text).value()
+        if not values:
+            raise ValueError("give at least one KEY=VALUE (e.g. coef=0.5)")
+        check_contexts(values)
+    except ValueError as exc:  # ContextSpecError or InvalidContextError, naming the entry
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
 

@@ -56,7 +56,11 @@ def _main(script: ModuleType, argv: list[str], monkeypatch: pytest.MonkeyPatch) 
     ("script", "argv", "message"),
     [
         (bench_env, ["--repeats", "0"], "argument --repeats: must be at least 1, got 0"),
-        (bench_env, ["--seconds", "nan"], "argument --seconds: must be a finite number above 0"),
+        (
+            bench_env,
+            ["--seconds", "nan"],
+            "argument --seconds: must be a finite number of at least",
+        ),
         (bench_vector, ["--envs", "4", TOO_MANY], f"--envs: must be in [1, {MAX_ARENAS}]"),
         (bench_vector, ["--pingpong-decisions", "-1"], "must be at least 0, got -1"),
         (bench_transport, ["--busy-poll-us", "2000", "-5"], "in [0, 100000], got -5.0"),
@@ -66,7 +70,11 @@ def _main(script: ModuleType, argv: list[str], monkeypatch: pytest.MonkeyPatch) 
             ["--base-port", "65534", "--counts", "1", "4"],
             "--base-port 65534 with --counts up to 4 puts servers past port 65535",
         ),
-        (soak, ["--window", "0"], "argument --window: must be at least 1, got 0"),
+        (soak, ["--window", "2"], "argument --window: must be at least 500, got 2"),  # 0 CPU
+        (bench_env, ["--seconds", "1e-9"], "--seconds: must be a finite number of at least 0.05"),
+        (bench_vector, ["--envs", "2", "2"], "--envs gives 2 twice: give each value once"),
+        (bench_scaling, ["--counts", "1", "1"], "--counts gives 1 twice"),
+        (bench_transport, ["--busy-poll-us", "500", "500"], "--busy-poll-us gives 500.0 twice"),
         (soak, ["--envs", TOO_MANY], f"argument --envs: must be in [1, {MAX_ARENAS}]"),
         (zenoh_floor, ["--arenas", "-1"], f"--arenas: must be in [0, {MAX_ARENAS}], got -1"),
         (zenoh_floor, ["--serve", "tcp"], "--serve needs --port"),
@@ -90,7 +98,7 @@ def test_a_script_refuses_a_bad_value_before_starting(
     [
         (bench_vector, ["--pingpong-decisions", "0", "--envs", "1", str(MAX_ARENAS)]),
         (bench_scaling, ["--base-port", "65532", "--counts", "4"]),
-        (soak, ["--warmup", "0", "--rebuilds", "0", "--decisions", "20", "--window", "10"]),
+        (soak, ["--warmup", "0", "--rebuilds", "0", "--decisions", "1000", "--window", "500"]),
         (zenoh_floor, ["--arenas", "0"]),
     ],
 )
@@ -155,3 +163,44 @@ def test_the_paper_table_refuses_a_bad_table_or_setting_before_any_run(
     assert message in capsys.readouterr().err
     if content is not None:
         assert out.read_text() == content  # never overwritten
+
+
+def test_scaling_refuses_a_base_port_in_use_before_any_fleet(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import socket
+
+    with socket.socket() as taken:  # a FleetStartError traceback minutes into the run
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = str(taken.getsockname()[1])
+        with pytest.raises(SystemExit):
+            _main(bench_scaling, ["--counts", "1", "--base-port", port], monkeypatch)
+    assert f"port {port} on 127.0.0.1 is already in use" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("module", "argv", "message"),
+    [
+        ("fuzz", ["--timeout", "0.0001"], "--timeout: must be a finite number of at least 0.5"),
+        ("fuzz", ["--arenas", "1", "1"], "--arenas gives 1 twice"),
+        ("faults", ["--skip", "servers", "ray", "learner"], "--skip leaves no part to run"),
+        ("bench_dynamics", ["--keys"], "--keys: expected at least one argument"),  # wrote 0 rows
+        ("bench_sampling", ["--envs", "2", "--groups", "3"], "--groups must not exceed --envs"),
+    ],
+)
+def test_more_scripts_refuse_a_run_that_cannot_mean_anything(
+    module: str,
+    argv: list[str],
+    message: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import importlib
+
+    script = importlib.import_module(f"bench.{module}")
+    monkeypatch.setattr(sys, "argv", [module, *argv])
+    with pytest.raises(SystemExit) as exit_:
+        script._args(argv) if module == "bench_sampling" else script.main()
+    assert exit_.value.code == 2
+    assert message in capsys.readouterr().err

@@ -95,3 +95,18 @@ def test_a_run_folder_that_cannot_be_resumed_is_set_aside_never_deleted(tmp_path
     second = set_aside(run)  # twice within a second: another name
     assert not run.exists() and first != second
     assert (first / "NOTES.txt").read_text() == "mine" and second.name.startswith(run.name)
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [(["--test-at", ""], "give at least one KEY=VALUE"),  # it trained the whole table
+     (["--test-at", "bogus=1"], "unknown context key 'bogus'"),  # a traceback after loading
+     (["--report", "--test-at", "coef=0.5"], "--report and --test-at are alternatives")],
+)  # fmt: skip
+def test_test_at_is_checked_before_anything_runs(
+    argv: list[str], said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--out", str(tmp_path / "t.json"), "--runs", str(tmp_path / "runs")])
+    assert stop.value.code == 2 and said in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
