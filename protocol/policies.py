@@ -15,6 +15,7 @@ trainers register one for their checkpoints. A team policy drives one team in ea
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from importlib.metadata import entry_points
 from typing import Any, Protocol
@@ -63,10 +64,19 @@ def loaders() -> list[tuple[str, Loader]]:
     return [(ep.name, ep.load()) for ep in found]
 
 
-def load_team_policy(text: str, what: str, bots: Sequence[str]) -> TeamPolicy:
-    """The policy ``text`` names, from the first installed loader that takes it; else
-    :class:`InvalidOptionError` naming ``what`` (e.g. ``--red``), the bot levels ``bots``
-    and the loaders installed."""
+def load_team_policy(text: str | os.PathLike[str], what: str, bots: Sequence[str]) -> TeamPolicy:
+    """The policy ``text`` names (a path is given to the loaders as its text), from the
+    first installed loader that takes it; else :class:`InvalidOptionError` naming ``what``
+    (e.g. ``--red``), the bot levels ``bots`` and the loaders installed. Anything but text
+    or a path is refused the same way before a loader sees it."""
+    if isinstance(text, os.PathLike):
+        text = os.fspath(text)
+    if not isinstance(text, str):
+        raise InvalidOptionError(
+            f"{what} {text!r:.60} ({type(text).__name__}) is neither a bot level "
+            f"({', '.join(bots)}) nor a policy's text, such as a checkpoint file or run "
+            "directory (a str or path)"
+        )
     installed = loaders()
     for _, loader in installed:
         policy = loader(text)

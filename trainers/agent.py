@@ -12,9 +12,24 @@ Acting calls the same module one step at a time.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
+
+from neuronsmae.protocol.errors import NeuronsMAEError
+
+
+class PolicyInputError(NeuronsMAEError, ValueError):
+    """What an acting policy was given does not fit it: observations or action masks of the
+    wrong shape, not numbers, or not finite; a mask that is not 0/1 or leaves an agent no
+    available action; arena indices out of range or named twice. The message names the
+    argument, the shape or range expected and what was given."""
+
+    code = "invalid_policy_input"
 
 
 def agent_input_dim(
@@ -120,6 +135,72 @@ class RNNAgent(nn.Module):
         return last(act(pre)).squeeze(-1)
 
 
+def _given(value: Any) -> str:
+    """``value`` as an error message describes it: its shape, or its type and repr."""
+    if isinstance(value, (np.ndarray, torch.Tensor)):
+        return f"an array of shape {list(value.shape)} ({value.dtype})"
+    return f"{type(value).__name__} {value!r:.60}"
+
+
+def _dims(axes: Sequence[str], shape: tuple[int, ...]) -> str:
+    """``["n_agents", "obs_dim"]``, ``(2, 37)`` → ``"[n_agents=2, obs_dim=37]"``."""
+    return "[" + ", ".join(f"{a}={n}" for a, n in zip(axes, shape, strict=True)) + "]"
+
+
+def observations(obs: Any, shape: tuple[int, ...], axes: Sequence[str]) -> np.ndarray:
+    """``obs`` as float32 of ``shape`` (``axes`` names its dimensions for the message),
+    finite; else :class:`PolicyInputError`. No copy when it already is float32."""
+    try:
+        x = np.asarray(obs, dtype=np.float32)
+    except (TypeError, ValueError) as exc:
+        raise PolicyInputError(
+            f"obs must be numbers of shape {_dims(axes, shape)}, got {_given(obs)}"
+        ) from exc
+    if x.shape != shape:
+        raise PolicyInputError(f"obs must have shape {_dims(axes, shape)}, got {_given(obs)}")
+    if not np.isfinite(x).all():
+        raise PolicyInputError(
+            f"obs must be finite numbers, got NaN or infinite values in {_dims(axes, shape)}"
+        )
+    return x
+
+
+def action_mask(
+    avail: Any, shape: tuple[int, ...], axes: Sequence[str], arenas: Sequence[int] | None = None
+) -> torch.Tensor:
+    """``avail`` (1/True = available, 0/False = not) as a bool tensor of ``shape`` (``axes``
+    names its dimensions), every agent with at least one available action; else
+    :class:`PolicyInputError` naming the agent (and its arena: ``arenas`` lists the arena
+    of each leading row)."""
+    try:
+        a = np.asarray(avail)
+    except ValueError:  # ragged rows
+        a = np.empty(0, object)
+    if a.shape != shape or a.dtype.kind not in "biuf":
+        raise PolicyInputError(
+            f"avail must be a 0/1 mask of shape {_dims(axes, shape)}, got {_given(avail)}"
+        )
+    kind = a.dtype.kind
+    if kind == "f":
+        binary = bool(((a == 0) | (a == 1)).all())
+    else:  # two reductions instead of comparisons for integers
+        binary = kind == "b" or not a.size or bool(a.min() >= 0 and a.max() <= 1)
+    if not binary:
+        bad = a[(a != 0) & (a != 1)][0].item()
+        raise PolicyInputError(f"avail must hold 0 or 1 (or booleans) only, got {bad!r}")
+    some = a.any(axis=-1)
+    if not some.all():
+        where = [int(i) for i in np.argwhere(~some)[0]]
+        agent = f"agent {where[-1]}"
+        if arenas is not None:
+            agent += f" in arena {int(arenas[where[0]])}"
+        raise PolicyInputError(
+            f"avail: {agent} has no available action (its mask row is all 0); the "
+            "environment allows at least the no-op, so the mask is not one it gave"
+        )
+    return torch.from_numpy(a if kind == "b" else a.astype(bool))
+
+
 def masked_greedy(q: torch.Tensor, avail: torch.Tensor) -> torch.Tensor:
     """Index of the best *available* action: ``q [..., A]``, ``avail [..., A]`` → ``[...]``."""
     return q.masked_fill(avail <= 0, float("-inf")).argmax(dim=-1)
@@ -137,11 +218,16 @@ def epsilon_greedy(
     one rate for every row or a ``[n]`` tensor of rates (a batched worker's rows belong to
     episodes at different ε). Exploration draws only among available actions, so a
     destroyed robot always gets its no-op and an unavailable action is never sent. Raises
-    ``ValueError`` if an agent has none available, which the environment contract rules out.
+    :class:`PolicyInputError` (a ``ValueError``) naming the row of an agent that has none
+    available, which the environment contract rules out.
     """
     allowed = avail > 0
-    if not bool(allowed.any(dim=-1).all()):
-        raise ValueError("an agent has no available action; the env must allow at least no-op")
+    some = allowed.any(dim=-1)
+    if not bool(some.all()):
+        row = int((~some).nonzero()[0, 0])
+        raise PolicyInputError(
+            f"avail: agent row {row} has no available action; the env must allow at least no-op"
+        )
     greedy = masked_greedy(q, allowed)
     if not bool(torch.as_tensor(epsilon).gt(0.0).any()):
         return greedy

@@ -15,14 +15,25 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
-from neuronsmae.protocol.errors import InvalidContextError
+from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, NeuronsMAEError
+from neuronsmae.protocol.interface import count_option, plain_contexts
 from neuronsmae.protocol.levels import level_error, level_from_arg, level_value
-from neuronsmae.trainers.agent import masked_greedy
+from neuronsmae.protocol.messages import MAX_ARENAS
+from neuronsmae.trainers.agent import action_mask, masked_greedy, observations
 from neuronsmae.trainers.buffer import Episode
-from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint, policy_weights
-from neuronsmae.trainers.learner import AgentSpec
+from neuronsmae.trainers.checkpoint import (
+    CheckpointError,
+    acting_parts,
+    checkpoint_path,
+    load_checkpoint,
+)
+from neuronsmae.trainers.match import check_seed
+from neuronsmae.trainers.opponents import acting_shape
 from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
 from neuronsmae.trainers.task import trained_options
+
+ENV_KINDS = ("inprocess", "remote")
+MASK_AXES = ("n_agents", "n_actions")
 
 
 def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
@@ -43,21 +54,60 @@ def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
 
 
 def load_policy(path: str | os.PathLike[str]) -> Policy:
-    """The acting part of a checkpoint (file or run directory): architecture and weights."""
-    payload = load_checkpoint(path)
-    spec = AgentSpec(**payload["agent_spec"])
-    return Policy(spec, policy_weights(payload["learner"]))
+    """The acting part of a checkpoint (file or run directory): architecture and weights.
+
+    :class:`CheckpointError` naming the file when it is no checkpoint, or its spec or
+    weights are missing, mistyped or do not fit each other."""
+    spec, weights, _ = acting_parts(load_checkpoint(path), path)
+    return Policy(spec, weights)
+
+
+def _checked(payload: dict[str, Any], path: str | os.PathLike[str], what: str, read: Any) -> Any:
+    """``read(payload)``, or :class:`CheckpointError` naming the file and ``what`` it could
+    not give (a config or counters missing or of another shape)."""
+    try:
+        return read(payload)
+    except (NeuronsMAEError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise CheckpointError(
+            f"{checkpoint_path(path)}: its {what} cannot be read ({type(exc).__name__}: {exc})"
+        ) from exc
+
+
+def checkpoint_options(payload: dict[str, Any], path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The arena options a loaded checkpoint's run trained with (without the mode);
+    :class:`CheckpointError` naming the file when its ``config`` cannot give them."""
+    return _checked(payload, path, "config's arena options",
+                    lambda p: trained_options(p["config"]))  # fmt: skip
+
+
+def run_facts(payload: dict[str, Any], path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A loaded checkpoint's arena options (``options``), algorithm (``alg``) and training
+    episodes (``episodes_trained``); :class:`CheckpointError` naming the file otherwise."""
+    return {
+        "options": checkpoint_options(payload, path),
+        "alg": _checked(payload, path, "config's alg", lambda p: str(p["config"]["alg"])),
+        "episodes_trained": _checked(payload, path, "counters' episodes",
+                                     lambda p: int(p["counters"]["episodes"])),
+    }  # fmt: skip
 
 
 class GreedyPolicy:
-    """A checkpoint's agents as a controller: call :meth:`reset`, then :meth:`act` each step."""
+    """A checkpoint's agents as a controller: call :meth:`reset`, then :meth:`act` each step.
+
+    Observations ``[n_agents, obs_dim]`` and masks ``[n_agents, n_actions]`` (1 or True:
+    available) of the team the checkpoint was trained for; anything else, or a mask that
+    leaves an agent no action, is a :class:`~neuronsmae.trainers.agent.PolicyInputError`
+    that leaves the recurrent state as it was."""
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        policy = load_policy(path)
-        self.spec = policy.spec
-        self.featurize = policy.spec.featurizer()
-        self.agent = policy.spec.build().eval()
-        self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
+        spec, weights, n_agents = acting_parts(load_checkpoint(path), path)
+        self.spec = spec
+        self.n_agents, self.obs_dim = acting_shape(spec, n_agents)
+        self.mask_shape = (self.n_agents, spec.n_actions)
+        """What :meth:`act` takes as masks: ``(n_agents, n_actions)``."""
+        self.featurize = spec.featurizer()
+        self.agent = spec.build().eval()
+        self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in weights.items()})
         self.hidden: torch.Tensor | None = None
         self.last: torch.Tensor | None = None
 
@@ -72,8 +122,9 @@ class GreedyPolicy:
         Follow it with :meth:`chose` (``act`` does both), so the next decision's input holds
         the actions actually taken.
         """
-        x = torch.as_tensor(self.featurize(np.asarray(obs, np.float32)))
-        n = x.shape[0]
+        n, d = self.n_agents, self.obs_dim
+        raw = observations(obs, (n, d), ("n_agents", "obs_dim"))
+        x = torch.as_tensor(self.featurize(raw))
         if self.hidden is None or self.last is None:
             self.hidden = self.agent.initial_hidden(n)
             self.last = torch.full((n,), -1, dtype=torch.int64)
@@ -106,9 +157,18 @@ def act_greedily(
 ) -> tuple[list[int], float]:
     """Each agent's greedy available action, and the team's value of them: the sum over
     agents of the chosen Q-values (VDN's team value; what the agents expect the rest of the
-    episode to bring)."""
-    allowed = torch.as_tensor(np.asarray(avail)) > 0
+    episode to bring).
+
+    The masks are checked first, against the policy's ``mask_shape`` when it has one (a
+    :class:`GreedyPolicy` does), else against the Q-values' shape: 0/1 values, and at
+    least one available action per agent (:class:`~neuronsmae.trainers.agent.PolicyInputError`
+    naming the agent otherwise)."""
+    shape = getattr(policy, "mask_shape", None)
+    if shape is not None:  # checked before the recurrent state advances
+        allowed = action_mask(avail, tuple(shape), MASK_AXES)
     q = policy.q_values(obs)
+    if shape is None:
+        allowed = action_mask(avail, tuple(q.shape), MASK_AXES)
     chosen = masked_greedy(q, allowed)
     policy.chose(chosen)
     value = float(q.gather(-1, chosen.unsqueeze(-1)).sum())
@@ -138,22 +198,39 @@ def evaluate_checkpoint(
     the rates of :func:`summarize` plus
     ``level``, ``seed``, ``checkpoint``, the run's ``alg`` and its training
     ``episodes_trained``.
+
+    Every argument is checked before anything loads or plays: ``episodes`` an integer ≥ 1,
+    ``seed`` an integer with ``seed + episodes - 1`` ≤ 2⁶³ − 1, ``envs`` in [1, 64]
+    (Python or NumPy integers), ``contexts`` a mapping, ``env`` one of ``inprocess`` and
+    ``remote``, and ``port`` only with ``remote``; errors name the argument and its range.
     """
     chosen = level_value(level_from_arg(level) if isinstance(level, str) else level)
     if chosen is None:
         raise InvalidContextError(level_error("level", level))
-    if episodes < 1:
-        raise ValueError(f"episodes must be ≥ 1, got {episodes}")
+    episodes = count_option("episodes", episodes, 1)
+    seed = check_seed(seed, episodes)
+    envs = count_option("envs", envs, 1, MAX_ARENAS)
+    ctx = {**(plain_contexts(contexts) or {}), "level": chosen}
+    if env not in ENV_KINDS:
+        raise InvalidOptionError(f"env must be one of {list(ENV_KINDS)}, got {env!r:.60}")
+    if port is not None:
+        if env != "remote":
+            raise InvalidOptionError(
+                f"port={port!r:.20} needs env='remote' (a server to play on); "
+                f"env={env!r} plays in this process"
+            )
+        port = count_option("port", port, 1, 65535)
     level = chosen
     payload = load_checkpoint(path)
-    policy = load_policy(path)
-    options = {**trained_options(payload["config"]), "mode": "cooperative"}
+    spec, weights, _ = acting_parts(payload, path)
+    facts = run_facts(payload, path)
+    options = {**facts.pop("options"), "mode": "cooperative"}
     worker = RolloutWorker(0, env, seed, port, options, envs=min(envs, episodes))
-    ctx = {**(contexts or {}), "level": level}
     try:
         played = worker.run(
-            policy, 0, [Request(seed + k, 0.0, ctx, "eval") for k in range(episodes)]
-        )
+            Policy(spec, weights), 0,
+            [Request(seed + k, 0.0, ctx, "eval") for k in range(episodes)],
+        )  # fmt: skip
     finally:
         worker.close()
     return {
@@ -161,8 +238,7 @@ def evaluate_checkpoint(
         "level": level,
         "seed": seed,
         "checkpoint": str(checkpoint_path(path)),
-        "alg": payload["config"]["alg"],
-        "episodes_trained": payload["counters"]["episodes"],
+        **facts,
     }
 
 

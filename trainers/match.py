@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -37,9 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
-from neuronsmae.protocol.interface import VecArenaAPI
-from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
+from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError, NeuronsMAEError
+from neuronsmae.protocol.interface import VecArenaAPI, count_option, seed_value
+from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg, level_value
+from neuronsmae.protocol.messages import MAX_ARENAS, MAX_SEED, max_first_seed
 from neuronsmae.protocol.policies import TeamPolicy, layout_differences, load_team_policy
 from neuronsmae.protocol.recording import (
     Decision,
@@ -76,11 +78,18 @@ class Side:
     policy: TeamPolicy | None = None
 
     @classmethod
-    def of(cls, text: str, what: str) -> Side:
-        """A bot level, or a policy through the ``neuronsmae.policies`` loaders."""
-        if text in LEVEL_ARGS:
-            return cls(text, level=level_from_arg(text))
-        return cls(text, policy=load_team_policy(text, what, LEVEL_ARGS))
+    def of(cls, side: str | int | os.PathLike[str], what: str) -> Side:
+        """A bot level (as a command line gives it, or as a number: 0, 1), or a policy
+        through the ``neuronsmae.policies`` loaders (text or a path); anything else is an
+        ``InvalidOptionError`` naming ``what`` and the valid sides."""
+        if isinstance(side, str) and side in LEVEL_ARGS:
+            return cls(side, level=level_from_arg(side))
+        if not isinstance(side, (str, os.PathLike)):
+            level = level_value(side)
+            if level is not None:
+                return cls(str(level), level=level)
+        policy = load_team_policy(side, what, LEVEL_ARGS)
+        return cls(str(os.fspath(side)), policy=policy)
 
 
 @dataclass
@@ -180,26 +189,59 @@ class _Episodes:
             )  # fmt: skip
 
 
+def _path(value: Any, name: str) -> Path | None:
+    """``record``/``gif`` as a Path (None stays None); ``InvalidOptionError`` unless text
+    or a path."""
+    if value is None or isinstance(value, Path):
+        return value
+    if isinstance(value, str) or (
+        isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
+    ):
+        return Path(value)
+    raise InvalidOptionError(
+        f"{name} must be a path (str or os.PathLike), got {type(value).__name__} {value!r:.60}"
+    )
+
+
+def check_seed(seed: Any, episodes: int) -> int:
+    """The seed of episode 0 (Python or NumPy integer) as an int: episode ``i`` is reset
+    with ``seed + i``, which must stay within 2⁶³ − 1; ``InvalidContextError`` naming
+    ``seed``, ``episodes`` and the valid range otherwise (``evaluate_checkpoint`` too)."""
+    value = seed_value(seed)
+    top = max_first_seed(episodes)
+    if value > top:
+        raise InvalidContextError(
+            f"seed={value} with episodes={episodes}: episode i is reset with seed + i, which "
+            f"must stay within {MAX_SEED}; seed must be in [0, {top}]"
+        )
+    return value
+
+
 def play(
-    blue: str,
-    red: str,
+    blue: str | int | os.PathLike[str],
+    red: str | int | os.PathLike[str],
     episodes: int,
     seed: int,
     *,
     arenas: int = 8,
     port: Sequence[int] | None = None,
     servers: int | None = None,
-    record: Path | None = None,
-    gif: Path | None = None,
+    record: str | os.PathLike[str] | None = None,
+    gif: str | os.PathLike[str] | None = None,
     options: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Play ``episodes`` and return the rates with 95% intervals and each episode's
     ``winners`` in episode order (see the module docstring for the sides and where they
-    play)."""
-    if episodes < 1 or arenas < 1:
-        raise InvalidOptionError(
-            f"episodes and arenas must be at least 1, got {episodes} and {arenas}"
-        )
+    play).
+
+    A side is a level (its command-line text, or the number 0 or 1) or a policy's text or
+    path. ``episodes`` (≥ 1), ``arenas`` (in [1, 64]) and ``seed`` (``seed + episodes - 1``
+    ≤ 2⁶³ − 1) are Python or NumPy integers; ``record`` and ``gif`` text or paths. Each is
+    checked before anything loads, and an error names it."""
+    episodes = count_option("episodes", episodes, 1)
+    arenas = count_option("arenas", arenas, 1, MAX_ARENAS)
+    seed = check_seed(seed, episodes)
+    record, gif = _path(record, "record"), _path(gif, "gif")
     setup = arrange(Side.of(blue, "--blue"), Side.of(red, "--red"), options)
     if record is not None and record.exists() and not record.is_dir():
         raise InvalidOptionError(f"record: {record} exists and is not a directory")
@@ -224,7 +266,7 @@ def play(
         from neuronsmae.server.tools.video import write_video
 
         write_video(gif, replay(first, render=True).frames)
-    result = summarise(blue, red, Counter(winners), episodes, seed)
+    result = summarise(setup.blue.name, setup.red.name, Counter(winners), episodes, seed)
     result["winners"] = winners
     return result
 

@@ -17,33 +17,82 @@ distributed as blue's are.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
-from neuronsmae.trainers.agent import masked_greedy
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.interface import count_option
+from neuronsmae.trainers.agent import PolicyInputError, action_mask, masked_greedy, observations
 
 if TYPE_CHECKING:
+    from neuronsmae.trainers.learner import AgentSpec
     from neuronsmae.trainers.rollout import Policy
+
+
+def acting_shape(spec: AgentSpec, n_agents: int) -> tuple[int, int]:
+    """The team size and raw observation width ``spec``'s network acts on: those of the
+    layout it carries, else ``n_agents`` and what its input width leaves for the observation
+    (raw features then). :class:`InvalidOptionError` if the layout's team is not
+    ``n_agents`` robots."""
+    if spec.env_info is not None:
+        team = int(spec.env_info["n_agents"])
+        if n_agents != team:
+            raise InvalidOptionError(
+                f"n_agents={n_agents}: this policy's agents were trained as a team of {team} "
+                f"and drive teams of {team} only"
+            )
+        return team, int(spec.env_info["obs_shape"])
+    one_hots = (spec.n_actions if spec.last_action else 0) + (n_agents if spec.agent_id else 0)
+    return n_agents, spec.input_dim - one_hots
 
 
 class GreedyTeam:
     """``policy``'s agents acting greedily (ε = 0, available actions only) for a team of
-    ``n_agents`` robots in each of ``num_envs`` arenas."""
+    ``n_agents`` robots in each of ``num_envs`` arenas.
+
+    ``num_envs`` and ``n_agents`` are checked (:class:`InvalidOptionError`), and so is what
+    :meth:`reset` and :meth:`act` are given (:class:`PolicyInputError`): shapes, masks,
+    and arena indices in range and each named once, so a bad call changes no arena's state.
+    """
 
     def __init__(self, policy: Policy, num_envs: int, n_agents: int) -> None:
+        num_envs = count_option("num_envs", num_envs, 1)
+        n_agents = count_option("n_agents", n_agents, 1)
         self.spec = policy.spec
+        self.n, self.obs_dim = acting_shape(policy.spec, n_agents)
         self.featurize = policy.spec.featurizer()
         self.agent = policy.spec.build().eval()
         self.agent.load_state_dict({k: torch.as_tensor(v) for k, v in policy.weights.items()})
-        self.n = n_agents
+        self.num_envs = num_envs
         self.hidden = self.agent.initial_hidden(num_envs * n_agents).reshape(num_envs, n_agents, -1)
         self.last = torch.full((num_envs, n_agents), -1, dtype=torch.int64)
 
+    def _index(self, arenas: Any, once: bool) -> np.ndarray:
+        """``arenas`` as int64 indices, each in ``[0, num_envs)`` (and named ``once``)."""
+        if isinstance(arenas, list) and all(type(i) is int for i in arenas):
+            picked = arenas  # the callers' usual form, checked in Python (a fraction of a µs)
+        else:
+            index = np.asarray(arenas)
+            if index.ndim != 1 or (index.size and index.dtype.kind not in "iu"):
+                raise PolicyInputError(
+                    f"arenas must be a sequence of arena indices in [0, {self.num_envs - 1}], "
+                    f"got {type(arenas).__name__} {arenas!r:.60}"
+                )
+            picked = index.tolist()
+        if picked and (min(picked) < 0 or max(picked) >= self.num_envs):
+            raise PolicyInputError(
+                f"arenas must be in [0, {self.num_envs - 1}] (the num_envs={self.num_envs} "
+                f"given to start), got {picked!r:.80}"
+            )
+        if once and len(set(picked)) != len(picked):
+            raise PolicyInputError(f"arenas names an arena twice: {picked!r:.80}")
+        return np.array(picked, dtype=np.int64)
+
     def reset(self, arenas: Sequence[int] | np.ndarray) -> None:
         """Forget the recurrent state of ``arenas`` (their new episodes start)."""
-        index = torch.as_tensor(np.asarray(arenas, dtype=np.int64))
+        index = torch.from_numpy(self._index(arenas, once=False))
         self.hidden[index] = 0.0
         self.last[index] = -1
 
@@ -52,17 +101,20 @@ class GreedyTeam:
             ) -> np.ndarray:  # fmt: skip
         """Greedy actions ``[m, n_agents]`` for ``arenas`` (m of them) from their raw
         observations ``[m, n_agents, D]`` and masks ``[m, n_agents, A]``."""
-        index = torch.as_tensor(np.asarray(arenas, dtype=np.int64))
-        m = len(index)
+        picked = self._index(arenas, once=True)
+        m, n = picked.size, self.n
+        raw = observations(obs, (m, n, self.obs_dim), ("len(arenas)", "n_agents", "obs_dim"))
+        mask = action_mask(avail, (m, n, self.spec.n_actions),
+                           ("len(arenas)", "n_agents", "n_actions"), picked)  # fmt: skip
         if m == 0:
-            return np.zeros((0, self.n), np.int64)
-        x = torch.from_numpy(np.ascontiguousarray(self.featurize(obs), dtype=np.float32))
+            return np.zeros((0, n), np.int64)
+        index = torch.from_numpy(picked)
+        x = torch.from_numpy(np.ascontiguousarray(self.featurize(raw), dtype=np.float32))
         inputs = self.spec.inputs(x, self.last[index])  # [m, n, input]
-        hidden = self.hidden[index].reshape(1, m * self.n, -1)
-        q, hidden = self.agent(inputs.reshape(m * self.n, 1, -1), hidden)
-        allowed = torch.from_numpy(np.asarray(avail) > 0).reshape(m * self.n, -1)
-        chosen = masked_greedy(q[:, 0], allowed).reshape(m, self.n)
-        self.hidden[index] = hidden.reshape(m, self.n, -1)
+        hidden = self.hidden[index].reshape(1, m * n, -1)
+        q, hidden = self.agent(inputs.reshape(m * n, 1, -1), hidden)
+        chosen = masked_greedy(q[:, 0], mask.reshape(m * n, -1)).reshape(m, n)
+        self.hidden[index] = hidden.reshape(m, n, -1)
         self.last[index] = chosen
         return chosen.numpy()
 

@@ -13,24 +13,39 @@ from pathlib import Path
 
 import numpy as np
 
-from neuronsmae.trainers.checkpoint import checkpoint_path, load_checkpoint
-from neuronsmae.trainers.evaluate import load_policy
+from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.interface import count_option
+from neuronsmae.trainers.checkpoint import acting_parts, checkpoint_path, load_checkpoint
+from neuronsmae.trainers.evaluate import checkpoint_options
 from neuronsmae.trainers.opponents import GreedyTeam
-from neuronsmae.trainers.task import trained_options
+from neuronsmae.trainers.rollout import Policy
 
 
 class CheckpointPolicy:
-    """A checkpoint's agents as a :class:`~neuronsmae.protocol.policies.TeamPolicy`."""
+    """A checkpoint's agents as a :class:`~neuronsmae.protocol.policies.TeamPolicy`.
+
+    The checkpoint is checked as it loads (:class:`CheckpointError` naming the file), the
+    team :meth:`start` is given against the checkpoint's (``InvalidOptionError``), and
+    :meth:`reset` and :meth:`act` check their arguments (shapes ``[m, n_agents, ...]``,
+    arena indices in range and each named once, masks of 0/1 that leave every agent an
+    action: :class:`~neuronsmae.trainers.agent.PolicyInputError`)."""
 
     def __init__(self, path: str | Path) -> None:
         payload = load_checkpoint(path)
         self.path = str(checkpoint_path(path))
-        self.policy = load_policy(path)
-        self.options = trained_options(payload["config"])
-        self.env_info = self.policy.spec.env_info
+        spec, weights, self.n_agents = acting_parts(payload, path)
+        self.policy = Policy(spec, weights)
+        self.options = checkpoint_options(payload, path)
+        self.env_info = spec.env_info
         self.team: GreedyTeam | None = None
 
     def start(self, num_envs: int, n_agents: int) -> None:
+        n_agents = count_option("n_agents", n_agents, 1)
+        if n_agents != self.n_agents:
+            raise InvalidOptionError(
+                f"n_agents={n_agents}: {self.path} holds agents of a team of "
+                f"{self.n_agents} and drives teams of {self.n_agents} robots only"
+            )
         self.team = GreedyTeam(self.policy, num_envs, n_agents)
 
     def reset(self, arenas: Sequence[int]) -> None:

@@ -7,10 +7,12 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
-from neuronsmae.protocol.errors import InvalidOptionError
+from neuronsmae.protocol.errors import InvalidContextError, InvalidOptionError
 from neuronsmae.protocol.levels import LEVEL_ARGS
 from neuronsmae.protocol.recording import read_recording
 from neuronsmae.server.tools import replay as R
@@ -44,8 +46,63 @@ def test_bot_levels_on_both_sides_from_the_command_line(capsys: pytest.CaptureFi
 
 
 def test_play_refuses_zero_arenas_instead_of_playing_one() -> None:
-    with pytest.raises(InvalidOptionError, match="arenas must be at least 1, got 2 and 0"):
+    with pytest.raises(InvalidOptionError, match=r"arenas must be an integer \[1, 64\], got 0"):
         M.play("easy", "easy", 2, 0, arenas=0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "said"),
+    [
+        ({"episodes": 2.5}, InvalidOptionError, "episodes must be an integer >= 1, got 2.5"),
+        ({"episodes": "2"}, InvalidOptionError, "episodes must be an integer >= 1, got '2'"),
+        ({"episodes": 0}, InvalidOptionError, "episodes must be an integer >= 1, got 0"),
+        ({"arenas": 100}, InvalidOptionError, r"arenas must be an integer \[1, 64\], got 100"),
+        ({"arenas": 2.0}, InvalidOptionError, r"arenas must be an integer \[1, 64\], got 2.0"),
+        ({"seed": 2**63 - 2, "episodes": 3}, InvalidContextError,
+         r"seed=9223372036854775806 with episodes=3: .* must be in \[0, 9223372036854775805\]"),
+        ({"seed": -1}, InvalidContextError, r"seed -1 is out of range; valid: \[0, "),
+        ({"seed": 1.5}, InvalidContextError, "seed must be an integer"),
+        ({"record": 5}, InvalidOptionError, r"record must be a path \(str or os.Path.*got int"),
+        ({"gif": ["x.gif"]}, InvalidOptionError, r"gif must be a path \(str or os.Path.*got list"),
+    ],
+)  # fmt: skip
+def test_play_names_the_argument_that_is_wrong_before_playing(
+    kwargs: dict[str, Any], error: type[Exception], said: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """episodes=2.5 and arenas=100 named num_envs (the arena vector's), a seed whose last
+    episode overflows named 'arena 0' once the first episodes were played."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    args: dict[str, Any] = {"episodes": 2, "seed": 0, **kwargs}
+    with pytest.raises(error, match=said):
+        M.play("easy", "easy", **args)
+
+
+@pytest.mark.parametrize("side", [7, 2, None, 1.5, True, ["easy"]])
+def test_a_side_neither_level_nor_path_lists_the_valid_sides(
+    side: object, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """play(1, ...) gave pathlib's TypeError though evaluate_checkpoint takes level numbers."""
+    monkeypatch.setattr(M, "open_arenas", lambda *a, **k: pytest.fail("played"))
+    with pytest.raises(InvalidOptionError, match=r"--blue .* is neither a bot level \(0, 1, easy"):
+        M.play(side, "easy", 1, 0)  # type: ignore[arg-type]
+
+
+def test_level_numbers_and_paths_are_sides(
+    checkpoints: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Levels as numbers (Python or NumPy), checkpoints as Path, and record/gif as str
+    (record='/tmp/x' failed with AttributeError: 'str' object has no attribute 'exists')."""
+    drawn: list[str] = []
+    monkeypatch.setattr(
+        "neuronsmae.server.tools.video.write_video", lambda path, frames: drawn.append(str(path))
+    )
+    rec, gif = str(tmp_path / "rec"), str(tmp_path / "first.gif")
+    result = M.play(checkpoints[0], np.int64(1), np.int64(1), np.int64(4), record=rec, gif=gif)
+    assert (result["blue"], result["red"], result["seed"]) == (str(checkpoints[0]), "1", 4)
+    assert [f.name for f in Path(rec).iterdir()] == ["episode_00000_s4.jsonl.gz"]
+    assert drawn == [gif]
+    bots = M.play(0, "easy", 1, 4)
+    assert bots["blue"] == "0" and len(bots["winners"]) == 1
 
 
 def test_options_the_match_sets_itself_and_zero_servers_are_refused(
