@@ -86,3 +86,23 @@ def test_the_released_levels_play_as_numbers() -> None:
     """``--level 0`` reached reset as the string "0", which the arena refuses."""
     result = train(parse_args(["--level", "0", "--episodes", "1", "--eval-episodes", "1"]))
     assert 0.0 <= result["win_rate"] <= 1.0
+
+
+def test_training_starts_stay_below_the_held_out_seeds(monkeypatch: pytest.MonkeyPatch) -> None:
+    from neuronsmae.trainers import minimal
+
+    seeds: list[int] = []
+    real = minimal.play
+
+    def spy(env, agent, info, level, seed, *rest):  # type: ignore[no-untyped-def]
+        seeds.append(seed)
+        return real(env, agent, info, level, seed, *rest)
+
+    monkeypatch.setattr(minimal, "play", spy)
+    args = Args(seed=20_000, episodes=2, batch_size=2, hidden=16, eval_episodes=1)
+    arena = Arena(seed=0, action_space="abstract")
+    try:
+        train(args, arena)  # seed * 100_003 passed 10⁹ for seeds ≥ 10,000: held-out starts
+    finally:
+        arena.close()
+    assert all(s < minimal.EVAL_SEED for s in seeds[:2]) and seeds[2] == minimal.EVAL_SEED

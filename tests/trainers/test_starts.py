@@ -89,3 +89,8 @@ def test_state_round_trip_continues_identically_and_requeues_in_flight() -> None
 def test_config_rejects_out_of_range_values(key: str, value: str, words: str) -> None:
     with pytest.raises(ConfigError, match=words.replace("[", r"\[").replace("]", r"\]")):
         make_config({}, {key: value})
+
+
+def test_bad_arguments_are_a_value_error_not_an_assert() -> None:
+    with pytest.raises(ValueError, match="max_plays ≥ 2"):  # an AssertionError, gone under -O
+        StartReplay(0.5, 1, 8, seed=1)

@@ -33,7 +33,11 @@ class StartReplay:
     """Chooses each training episode's reset seed: fresh, or a recently lost start."""
 
     def __init__(self, probability: float, max_plays: int, capacity: int, seed: int) -> None:
-        assert 0.0 <= probability <= 1.0 and max_plays >= 2 and capacity >= 1
+        if not (0.0 <= probability <= 1.0 and max_plays >= 2 and capacity >= 1):
+            raise ValueError(
+                f"StartReplay needs probability in [0, 1], max_plays ≥ 2 and capacity ≥ 1, got "
+                f"{probability!r}, {max_plays!r} and {capacity!r}"
+            )
         self.probability, self.max_plays, self.capacity = probability, max_plays, capacity
         self.rng = np.random.default_rng([seed, _STREAM])
         self.queued: OrderedDict[int, int] = OrderedDict()
