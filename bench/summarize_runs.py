@@ -15,7 +15,6 @@ this checkout's ``git rev-parse HEAD``. An existing ``--out`` is replaced only w
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 import time
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.common import add_out, commit, machine, out_problem, table, write_out
+from neuronsmae.trainers.records import read_records
 
 CONFIG_KEYS = ("alg", "level", "seed", "workers", "env", "envs_per_worker", "max_minutes",
                "opponent", "preset", "contexts", "arena", "selfplay")  # fmt: skip
@@ -31,21 +31,6 @@ EVAL_NEEDS = ("episodes", "env_steps", "win_rate", "draw_rate", "loss_rate", "me
               "eval_episodes", "split", "weights", "contexts")  # fmt: skip
 TRAIN_NEEDS = ("updates", "wall_seconds")
 """The columns of ``eval.csv`` and ``train.csv`` a summary reads."""
-
-
-def _rows(path: Path, needs: tuple[str, ...]) -> list[dict[str, str]]:
-    """The rows of a records CSV, which must have the columns ``needs``."""
-    try:
-        with path.open(newline="", encoding="utf-8") as f:
-            reader = csv.DictReader(f)
-            rows = list(reader)
-            columns = reader.fieldnames or []
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise ValueError(f"{path} is not a records CSV: {exc}") from None
-    missing = [c for c in needs if c not in columns]
-    if missing:
-        raise ValueError(f"{path} lacks the column(s) {missing}; is it a run's records file?")
-    return rows
 
 
 def _number(path: Path, rows: list[dict[str, str]], row: dict[str, str], column: str,
@@ -69,7 +54,7 @@ def summarize(name: str, run_dir: Path) -> dict[str, Any]:
     if not isinstance(config, dict):
         raise ValueError(f"{run_dir}/config.json is not a run's configuration: not an object")
     evals_csv, train_csv = run_dir / "eval.csv", run_dir / "train.csv"
-    evals = _rows(evals_csv, EVAL_NEEDS)
+    evals = read_records(evals_csv, EVAL_NEEDS)
     tests = [r for r in evals if r["split"] == "test"]
     if not tests:
         raise ValueError(f"{run_dir}: eval.csv has no test rows; the run did not finish")
@@ -78,7 +63,7 @@ def summarize(name: str, run_dir: Path) -> dict[str, Any]:
             f"{evals_csv} has no test row of the final weights (weights 'latest', contexts "
             "'main'); the run did not finish its test"
         )
-    trains = _rows(train_csv, TRAIN_NEEDS)
+    trains = read_records(train_csv, TRAIN_NEEDS)
     if not trains:
         raise ValueError(f"{train_csv} has no rows; the run did not finish")
     last_train = trains[-1]

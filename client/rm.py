@@ -99,8 +99,8 @@ class RM(ArenaAPI):
         self.options = dict(options)
         self._cache: dict[str, Any] = {}
         """What the last reset/step left: obs, state, avail_actions (private copies)."""
-        self._known: dict[str, int] = {}
-        """What does not change while this client lives (``n_agents``)."""
+        self._agents: int | None = None
+        """``n_agents``, asked once (it does not change while this client lives)."""
         self._conn = Connection(
             port=port,
             command=lambda p: ServerCommand(
@@ -166,9 +166,9 @@ class RM(ArenaAPI):
 
     def _n_agents(self) -> int:
         """How many agents act (for messages), asked once."""
-        if "n_agents" not in self._known:
-            self._known["n_agents"] = int(self.get_env_info()["n_agents"])
-        return self._known["n_agents"]
+        if self._agents is None:
+            self._agents = int(self.get_env_info()["n_agents"])
+        return self._agents
 
     def get_obs(self) -> list[np.ndarray]:
         return self._read("obs")

@@ -37,7 +37,7 @@ import numpy as np
 from gymnasium import spaces
 
 from neuronsmae.protocol import env_info
-from neuronsmae.protocol.actions import check_sequence, is_number
+from neuronsmae.protocol.actions import check_sequence, holds_numbers
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import InvalidActionError, InvalidOptionError
 from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
@@ -169,10 +169,8 @@ class Layout:
             if isinstance(action, np.ndarray) and action.shape == ():
                 return action.item()
             return action.item() if isinstance(action, np.generic) else action
-        raw = np.asarray(action) if not isinstance(action, (list, tuple)) else None
-        numbers = raw.dtype.kind in "iuf" if raw is not None else all(map(is_number, action))
-        arr = np.asarray(action, dtype=np.float64) if numbers else np.full(4, np.nan)
-        if arr.shape != (4,) or not np.isfinite(arr).all():
+        arr = np.asarray(action, dtype=np.float64) if holds_numbers(action) else None
+        if arr is None or arr.shape != (4,) or not np.isfinite(arr).all():
             raise InvalidActionError(
                 f"{agent}: a continuous action is 4 finite numbers (vx, vy, omega, target), "
                 f"got {action!r}"

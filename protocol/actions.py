@@ -27,15 +27,13 @@ CONTINUOUS_NOOP = (0.0, 0.0, 0.0, 0)
 _MOTION = (("vx", V_MAX), ("vy", V_MAX), ("omega", W_MAX))
 
 
-def is_sequence(actions: Any) -> bool:
-    """Whether ``actions`` can be a sequence of per-agent actions: not a mapping (iterating
-    it would read its keys), a set (no order), a string or bytes (its characters), a
-    scalar or None."""
-    if isinstance(actions, (str, bytes, bytearray, Mapping, Set)):
+def is_sequence(values: Any) -> bool:
+    """Whether ``values`` can be a sequence of per-agent (or per-arena) entries: not a
+    mapping (iterating it would read its keys), a set (no order), a string or bytes (its
+    characters), a scalar, a 0-d array or tensor, or None."""
+    if isinstance(values, (str, bytes, bytearray, Mapping, Set)):
         return False
-    if isinstance(actions, np.ndarray):
-        return actions.ndim > 0
-    return hasattr(actions, "__len__")
+    return hasattr(values, "__len__") and getattr(values, "ndim", 1) != 0
 
 
 def check_sequence(actions: Any, n_agents: int, what: str = "actions") -> None:
@@ -80,6 +78,18 @@ def is_number(value: Any) -> bool:
     except Exception:
         return False
     return arr.shape == () and arr.dtype.kind in "iuf"
+
+
+def holds_numbers(action: Any) -> bool:
+    """Whether ``action`` holds real numbers only: a list or tuple of :func:`is_number`
+    entries, or an array(-like) whose dtype is integer or float (strings, bytes, bools and
+    objects would pass through NumPy's float conversion otherwise)."""
+    if isinstance(action, (list, tuple)):
+        return all(is_number(v) for v in action)
+    try:
+        return np.asarray(action).dtype.kind in "iuf"
+    except Exception:
+        return False
 
 
 def _numbers(agent: int, action: Any) -> list[float]:

@@ -14,17 +14,18 @@ methods below are indexed by that order.
 from __future__ import annotations
 
 import abc
-from collections.abc import Mapping, Sequence, Set
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.actions import is_sequence
 from neuronsmae.protocol.errors import (
     InvalidContextError,
     InvalidOptionError,
     NeuronsMAEError,
 )
-from neuronsmae.protocol.messages import MAX_SEED
+from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
 
 Action = Any
 """One agent's action: an ``int`` (abstract, discrete) or 4 floats ``(vx, vy, omega, target)``."""
@@ -132,8 +133,7 @@ def per_arena(
     """``values`` as a list of one entry per arena (the vector calls' rule for ``seeds``,
     ``contexts`` and action rows); ``error`` (naming ``name``) when it is not a sequence of
     ``num_envs`` entries."""
-    unordered = isinstance(values, (str, bytes, bytearray, Mapping, Set))
-    if unordered or not hasattr(values, "__len__") or np.ndim(values) == 0:
+    if not is_sequence(values):
         raise error(
             f"{name} must be a sequence of {num_envs} entries (one per arena, or None), "
             f"got {values!r:.80}"
@@ -160,10 +160,10 @@ def count_option(name: str, value: Any, lo: int, hi: int | None = None) -> int:
 
 def first_seed(seed: Any, num_envs: int) -> int:
     """A vector's ``seed`` option as an int: arena i is seeded ``seed + i``, so the seed is
-    an integer in [0, MAX_SEED - (num_envs - 1)]. None is refused, as ``Arena(seed=None)``
+    an integer in [0, max_first_seed(num_envs)]. None is refused, as ``Arena(seed=None)``
     is: ``RM(seed=None)`` keeps a server's own ``--seed``, which cannot give the arenas of
     several servers consecutive seeds. ``InvalidOptionError`` otherwise."""
-    top = MAX_SEED - (num_envs - 1)
+    top = max_first_seed(num_envs)
     if not _is_int(seed) or not 0 <= int(seed) <= top:
         raise InvalidOptionError(
             f"seed must be an integer in [0, {top}] (arena i is seeded seed + i), got {seed!r:.80}"
@@ -190,14 +190,13 @@ def seeds_per_arena(seed: Any, num_envs: int) -> list[int | None]:
     if seed is None:
         return [None] * num_envs
     if _is_int(seed):
-        first = seed_value(seed)
-        if first > MAX_SEED - (num_envs - 1):
+        first, top = seed_value(seed), max_first_seed(num_envs)
+        if first > top:
             raise InvalidContextError(
-                f"seed must be in [0, {MAX_SEED - (num_envs - 1)}] (arena i gets seed + i), "
-                f"got {first}"
+                f"seed must be in [0, {top}] (arena i gets seed + i), got {first}"
             )
         return [first + i for i in range(num_envs)]
-    if isinstance(seed, (str, bytes, bytearray, Mapping, Set)) or np.ndim(seed) == 0:
+    if not is_sequence(seed):
         raise InvalidContextError(
             f"seed must be an int (arena i gets seed + i) or a sequence of {num_envs} ints "
             f"or None (one per arena), got {type(seed).__name__} {seed!r:.80}"

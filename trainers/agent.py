@@ -44,6 +44,14 @@ def agent_input_dim(
     return obs_dim + (n_actions if last_action else 0) + (n_agents if agent_id else 0)
 
 
+def one_hot_width(spec: Any, n_agents: int) -> int:
+    """Input columns of ``spec``'s network (an ``AgentSpec``) after the observation's: the
+    one-hot last action and agent index it feeds (:func:`agent_input_dim` with no
+    observation)."""
+    return agent_input_dim(0, spec.n_actions, n_agents, last_action=spec.last_action,
+                           agent_id=spec.agent_id)  # fmt: skip
+
+
 def build_inputs(
     obs: torch.Tensor,
     last_actions: torch.Tensor,

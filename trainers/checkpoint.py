@@ -21,7 +21,8 @@ import torch
 
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.trainers.features import FEATURES, feature_dim
+from neuronsmae.trainers.agent import one_hot_width
+from neuronsmae.trainers.features import FEATURES, HEADS, feature_dim
 from neuronsmae.trainers.learner import AgentSpec, EnvSpec
 
 CHECKPOINT_NAME = "checkpoint.pt"
@@ -147,7 +148,6 @@ SPEC_FIELDS: dict[str, tuple[type, ...]] = {
     "agent_id": (bool,), "features": (str,), "head": (str,), "env_info": (dict, type(None)),
 }  # fmt: skip
 """The saved ``agent_spec``'s keys (:class:`AgentSpec`'s fields) and their types."""
-HEADS = ("flat", "points")
 
 
 def _part(payload: dict[str, Any], key: str, p: Path) -> dict[str, Any]:
@@ -189,7 +189,7 @@ def _spec(saved: dict[str, Any], n_agents: Any, p: Path) -> AgentSpec:
             f"{p}: agent_spec features={spec.features!r}, head={spec.head!r}; valid: "
             f"features in {list(FEATURES)}, head in {list(HEADS)}"
         )
-    extra = (spec.n_actions if spec.last_action else 0) + (n_agents if spec.agent_id else 0)
+    extra = one_hot_width(spec, n_agents)
     try:
         spec.featurizer()
         info = None if spec.env_info is None else EnvInfo.from_dict(spec.env_info)

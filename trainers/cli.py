@@ -38,7 +38,7 @@ from neuronsmae.trainers.config import (
     read_config_file,
 )
 from neuronsmae.trainers.mixers import ALGORITHMS
-from neuronsmae.trainers.records import check_new_run_dir
+from neuronsmae.trainers.records import check_new_run_dir, make_run_dir
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -126,15 +126,6 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     if not args.resume:
         check_new_run_dir(cfg.run_dir)
     return cfg
-
-
-def make_run_dir(run_dir: Path) -> None:
-    """Create the run directory now, so that an ``--out`` that cannot be one is refused
-    before Ray and the workers start."""
-    try:
-        run_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise ConfigError(f"out {str(run_dir)!r} cannot be created: {err.strerror}") from None
 
 
 def saved_config(path: Path) -> TrainConfig:

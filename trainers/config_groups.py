@@ -25,7 +25,7 @@ from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.protocol.transport import check_locator
 from neuronsmae.trainers.contexts import ContextSpec, ContextSpecError
-from neuronsmae.trainers.features import FEATURES, POINT_FEATURES
+from neuronsmae.trainers.features import FEATURES, HEADS, POINT_FEATURES
 from neuronsmae.trainers.symmetry import parse_generators
 
 SERVER_PLACEMENTS = ("local", "actors")
@@ -218,7 +218,7 @@ class LearnerConfig:
     def __post_init__(self) -> None:
         check_types(self)
         check_choice("features", self.features, (*FEATURES, "auto"))
-        check_choice("head", self.head, ("flat", "points", "auto"))
+        check_choice("head", self.head, (*HEADS, "auto"))
         if self.head == "points" and self.features not in (*POINT_FEATURES, "auto"):
             raise ConfigError(
                 f"head='points' needs features in {POINT_FEATURES}, got {self.features!r}"

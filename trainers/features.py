@@ -33,6 +33,9 @@ FEATURES = ("raw", "relative")
 """Feature sets by name."""
 POINT_FEATURES = ("relative",)
 """Feature sets that describe each abstract action, as the ``points`` head needs."""
+HEADS = ("flat", "points")
+"""The agent network's Q heads by name (``AgentSpec.head``): one linear output per action,
+or that plus a per-action scorer of the ``POINT_FEATURES``."""
 
 Featurizer = Callable[[np.ndarray], np.ndarray]
 """``obs [..., obs_shape]`` → ``[..., width]`` float32."""

@@ -24,7 +24,13 @@ import torch
 
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.interface import count_option
-from neuronsmae.trainers.agent import PolicyInputError, action_mask, masked_greedy, observations
+from neuronsmae.trainers.agent import (
+    PolicyInputError,
+    action_mask,
+    masked_greedy,
+    observations,
+    one_hot_width,
+)
 
 if TYPE_CHECKING:
     from neuronsmae.trainers.learner import AgentSpec
@@ -44,8 +50,7 @@ def acting_shape(spec: AgentSpec, n_agents: int) -> tuple[int, int]:
                 f"and drive teams of {team} only"
             )
         return team, int(spec.env_info["obs_shape"])
-    one_hots = (spec.n_actions if spec.last_action else 0) + (n_agents if spec.agent_id else 0)
-    return n_agents, spec.input_dim - one_hots
+    return n_agents, spec.input_dim - one_hot_width(spec, n_agents)
 
 
 class GreedyTeam:

@@ -18,7 +18,6 @@ mean and spread. ``--out`` is replaced if it exists.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import sys
@@ -31,6 +30,7 @@ import numpy as np
 
 from neuronsmae.protocol.errors import InvalidOptionError, MissingDependencyError, NeuronsMAEError
 from neuronsmae.trainers.outputs import check_file
+from neuronsmae.trainers.records import RecordsError, read_records
 
 PAPER_WIN_RATE: dict[str, dict[str, float]] = {
     "easy": {"iql": 0.75, "vdn": 0.93, "qmix": 0.89},
@@ -78,18 +78,10 @@ def read_csv(path: Path, needs: Sequence[str] = ()) -> dict[str, np.ndarray]:
     if not path.is_file():
         return {}
     try:
-        with path.open(newline="", encoding="utf-8") as f:
-            reader = csv.DictReader(f)
-            rows = [r for r in reader if r.get("split") in (None, "", "validation")]
-            columns = reader.fieldnames
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise RunDirError(f"{path} is not a records CSV: {exc}") from None
-    missing = [c for c in needs if columns is not None and c not in columns]
-    if missing:
-        raise RunDirError(
-            f"{path} lacks the column(s) {missing} (it has {list(columns or [])}): "
-            "not a neuronsmae-train records file"
-        )
+        every = read_records(path, needs)
+    except RecordsError as exc:
+        raise RunDirError(str(exc)) from None
+    rows = [r for r in every if r.get("split") in (None, "", "validation")]
     if not rows:
         return {}
     return {key: np.array([_num(r.get(key)) for r in rows]) for key in rows[0]}

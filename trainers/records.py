@@ -18,12 +18,14 @@ import fcntl
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.trainers.config_groups import ConfigError
 
 RUN_FILES = ("config.json", "checkpoint.pt", "best.pt", "train.csv", "eval.csv", "episodes.csv")
@@ -137,6 +139,16 @@ LOCK_NAME = ".lock"
 """The file in a run directory that a training process holds locked while it runs."""
 
 
+def make_run_dir(run_dir: Path) -> None:
+    """Create the run directory (and its parents) if missing; :class:`ConfigError` naming
+    ``out`` when it cannot be one. The command line calls it before Ray and the workers
+    start, :class:`RunLock` whenever a trainer is built."""
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"out {str(run_dir)!r} cannot be created: {err.strerror}") from None
+
+
 class RunLock:
     """An exclusive lock on a run directory for as long as one process trains in it.
 
@@ -146,11 +158,11 @@ class RunLock:
     """
 
     def __init__(self, run_dir: Path) -> None:
+        make_run_dir(run_dir)
         try:
-            run_dir.mkdir(parents=True, exist_ok=True)
             self.file = (run_dir / LOCK_NAME).open("a+")
         except OSError as err:
-            raise ConfigError(f"out {str(run_dir)!r} cannot be created: {err}") from None
+            raise ConfigError(f"out {str(run_dir)!r}: cannot open its lock file: {err}") from None
         try:
             fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -171,6 +183,30 @@ class RunLock:
         if not self.file.closed:
             fcntl.flock(self.file, fcntl.LOCK_UN)
             self.file.close()
+
+
+class RecordsError(NeuronsMAEError, ValueError):
+    """A file given as one of a run's CSV records is not one."""
+
+
+def read_records(path: Path, needs: Sequence[str] = ()) -> list[dict[str, str]]:
+    """The rows of one of a run's CSV records (``train.csv``, ``eval.csv``,
+    ``episodes.csv``), as text. :class:`RecordsError` naming the file when it is not UTF-8
+    CSV, or when its header lacks a column of ``needs`` (an empty file has no header yet
+    and gives no rows)."""
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            rows, columns = list(reader), reader.fieldnames
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise RecordsError(f"{path} is not a records CSV: {exc}") from None
+    missing = [c for c in needs if columns is not None and c not in columns]
+    if missing:
+        raise RecordsError(
+            f"{path} lacks the column(s) {missing} (it has {list(columns or [])}): "
+            "not a neuronsmae-train records file"
+        )
+    return rows
 
 
 COUNT_COLUMNS = {"train.csv": "episodes", "eval.csv": "episodes", "episodes.csv": "episode"}
