@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 import zenoh
 
-from bench.common import free_port as free_port  # re-exported: the tests import both here
 from bench.common import same as same
 from neuronsmae.client import answering_pid
 from neuronsmae.protocol.messages import Reply, decode_reply, rpc_key
 from neuronsmae.protocol.transport import client_config
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.serving.service import warm_up
+from tests.ports import free_port as free_port  # re-exported: the tests import both here
 
 STARTUP_TIMEOUT = 120.0
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import random
 import signal
 import socket
 import subprocess
@@ -14,45 +13,22 @@ from pathlib import Path
 
 import pytest
 
+from tests.ports import free_ports as free_ports  # re-exported for the deploy tests
+
 REPO = Path(__file__).resolve().parents[2]
 ROUTER_SCRIPT = REPO / "deploy" / "run_router.py"
 
 
-def free_ports(count: int = 1) -> int:
-    """The first of ``count`` consecutive loopback ports that are free right now."""
-    for _ in range(50):
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            base = s.getsockname()[1]
-        if base + count < 65536 and all(_free(base + i) for i in range(1, count)):
-            return base
-    raise RuntimeError(f"no {count} consecutive free ports")
-
-
 TEST_PORTS = range(28000, 29000)
 """Where the tests of the fleet's state file and the router's defaults take their ports: a
-block of its own on a shared machine, below the kernel's ephemeral range (from 32768) that
-:func:`free_ports` draws from."""
+block of its own on a shared machine, apart from :data:`tests.ports.TEST_PORTS` that the
+other tests draw from."""
 
 
 def free_test_ports(count: int = 1) -> int:
     """The first of ``count`` consecutive loopback ports in :data:`TEST_PORTS` that are
     free right now, from a random start so that concurrent runs rarely meet."""
-    starts = list(TEST_PORTS[: len(TEST_PORTS) - count + 1])
-    offset = random.randrange(len(starts))
-    for base in starts[offset:] + starts[:offset]:
-        if all(_free(base + i) for i in range(count)):
-            return base
-    raise RuntimeError(f"no {count} consecutive free ports in {TEST_PORTS}")
-
-
-def _free(port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
+    return free_ports(count, TEST_PORTS)
 
 
 def wait_for(predicate: Callable[[], bool], timeout: float, what: str) -> None:

@@ -21,6 +21,7 @@ from ray.cluster_utils import Cluster
 
 from neuronsmae.trainers.config import ConfigError, make_config, parse_resources
 from neuronsmae.trainers.train import Trainer
+from tests.ports import free_ports
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
@@ -70,12 +71,6 @@ def cluster(loopback_ray: None) -> Iterator[dict[str, str]]:
         c.shutdown()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _listening(port: int) -> bool:
     with socket.socket() as s:
         return s.connect_ex(("127.0.0.1", port)) == 0
@@ -112,7 +107,7 @@ def test_workers_spread_over_both_nodes(cluster: dict[str, str], tmp_path: Path)
 
 
 def test_server_actors_on_the_sim_node(cluster: dict[str, str], tmp_path: Path) -> None:
-    base = min(_free_port(), 64000)
+    base = free_ports(2)  # both workers' ports, outside the range Ray's connections use
     result, seen = _run(
         {
             "alg": "qmix",
