@@ -58,6 +58,9 @@ def summarize(name: str, run_dir: Path) -> dict[str, Any]:
     tests = [r for r in evals if r["split"] == "test"]
     if not tests:
         raise ValueError(f"{run_dir}: eval.csv has no test rows; the run did not finish")
+    # A run resumed with a larger budget is tested again at its new end: its last test wins.
+    last = max(_number(evals_csv, evals, r, "episodes", int) for r in tests)
+    tests = [r for r in tests if _number(evals_csv, evals, r, "episodes", int) == last]
     if not any(r["weights"] == "latest" and r["contexts"] == "main" for r in tests):
         raise ValueError(
             f"{evals_csv} has no test row of the final weights (weights 'latest', contexts "

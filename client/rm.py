@@ -59,10 +59,10 @@ class RM(ArenaAPI):
     nothing listens on a local ``host`` and ``launch`` is True. ``time_scale`` and
     ``busy_poll_us`` only apply to a server launched this way, which is stopped by
     :meth:`close`. ``no_graphics`` is the released signature's flag and changes nothing: a
-    server is always headless, and ``render()`` returns frames either way. Every request
-    waits at most ``timeout`` seconds, then raises ``ServerUnavailableError``; if the server
-    comes back, the next request configures it again and carries on (the episode in progress
-    is lost).
+    3-D window opens only with the ``gui`` option, and ``render()`` returns frames either
+    way. Every request waits at most ``timeout`` seconds, then raises
+    ``ServerUnavailableError``; if the server comes back, the next request configures it
+    again and carries on (the episode in progress is lost).
 
     ``time_scale`` caps simulated time at that many times real time (the released build's
     Unity time scale; 100 by default, as released; 0 = unlimited).

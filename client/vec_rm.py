@@ -73,7 +73,8 @@ class VecRM(VecArenaAPI):
     ``seed`` and ``**options`` are those of ``VecArena(seed, num_envs, **options)``;
     ``host``, ``timeout``, ``router``, ``time_scale`` and ``busy_poll_us`` are ``RM``'s,
     except that ``time_scale`` defaults to 0 (unpaced): a vector client is there for
-    throughput; ``no_graphics``, as in ``RM``, changes nothing (servers are headless).
+    throughput; ``no_graphics``, as in ``RM``, changes nothing (a 3-D window
+    opens only with the ``gui`` option).
     ``seed`` must be an integer: unlike ``RM(seed=None)``, which keeps a server's own
     ``--seed``, a vector seeds arena i ``seed + i`` across its servers, which servers' own
     seeds cannot give (``InvalidOptionError``, as ``VecArena(seed=None)``).

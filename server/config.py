@@ -49,25 +49,26 @@ class ArenaConfig:
     values as ``level``: the released build's 0 or 1, or a name (easy, middle, hard, random,
     middle_spread, hard_flank; docs/contexts.md, "Bots")."""
     decision_steps: int | None = None
-    """Physics steps per decision; None → 20 (0.4 s), or 5 for discrete as released."""
+    """Physics steps per decision, 1 to 1000; None → 20 (0.4 s), or 5 for discrete as released."""
     episode_steps: int = 1000
-    """Physics steps per episode (1000 = 20 s)."""
+    """Physics steps per episode, 1 to 100,000 (1000 = 20 s)."""
     k: int = 4
-    """Candidate points per enemy for the abstract action space and observation."""
+    """Candidate points per enemy for the abstract action space and observation, 1 to 16."""
     candidate_obs: bool | None = None
     """Put candidate points in the vector observation; None → only for abstract actions."""
     observability: str = "full"
     """"full", or "partial": an enemy is seen only inside the camera's view and sight."""
     unseen_value: float = -1.0
-    """The constant that pads an unseen enemy's pose and candidate points."""
+    """The constant that pads an unseen enemy's pose and candidate points, in [-1, 1]."""
     camera_hfov_deg: float = 60.0
-    """Horizontal field of view of the gimbal camera (the spec fixes only 27° vertical)."""
+    """Horizontal field of view of the gimbal camera in degrees, 1 to 180 (the spec fixes
+    only 27° vertical)."""
     vector_obs: bool = True
     """Include the referee vector (poses, candidates, time, HP, bullets) in observations."""
     lidar: bool = False
     """Append a 61-beam, 270° LiDAR scan, each range divided by ``lidar_range``, to [-1, 1]."""
     lidar_range: float = 8.0
-    """LiDAR maximum range (m)."""
+    """LiDAR maximum range (m), 0.5 to 30."""
     reward: str = "dense"
     """"dense" (damage, kills, win) or "sparse" (win/loss only)."""
     spawn: str = "random"
@@ -84,7 +85,7 @@ class ArenaConfig:
     of raising InvalidActionError. The target is a choice, not a command: one that is not an
     integer naming an enemy is refused either way."""
     planner_resolution: float = 0.04
-    """Grid cell size of the abstract action planner (m)."""
+    """Grid cell size of the abstract action planner (m), 0.02 to 0.2."""
 
     def __post_init__(self) -> None:
         for name, choices in (

@@ -148,7 +148,7 @@ class TrainConfig:
     """sync: episodes per iteration, spread over the workers; 0 means one per worker. The
     paper's iteration is 20 (its 20 workers × 1 episode), whatever the worker count here."""
     torch_threads: int = 1
-    """Torch intra-op threads for the learner (workers always use 1)."""
+    """Torch intra-op threads for the learner, ≥ 1 (workers always use 1)."""
     progress: bool = True
     """Show the live tqdm progress bar."""
     learner: LearnerConfig = field(default_factory=LearnerConfig)

@@ -163,11 +163,11 @@ class LearnerConfig:
     grad_clip: float = 10.0
     """Largest gradient norm of an update, > 0; larger ones are scaled down to it (paper: 10)."""
     agent_hidden: int = 128
-    """GRU width of the shared agent network, in [1, MAX_WIDTH] (paper: 128)."""
+    """GRU width of the shared agent network, in [1, 4096] (paper: 128)."""
     mixer_embed: int = 32
-    """QMIX mixing-layer width, in [1, MAX_WIDTH] (paper: 32)."""
+    """QMIX mixing-layer width, in [1, 4096] (paper: 32)."""
     hypernet_hidden: int = 64
-    """QMIX hypernetwork hidden width, in [1, MAX_WIDTH]."""
+    """QMIX hypernetwork hidden width, in [1, 4096]."""
     td_lambda: float = 0.3
     """λ of the TD(λ) targets in [0, 1] (0: the paper's one-step targets; PyMARL2 uses 0.6).
     Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
@@ -211,9 +211,9 @@ class LearnerConfig:
     learning_starts: int = 64
     """Episodes in the buffer before learning begins, in [0, buffer_size]."""
     train_every: int = 1
-    """Asynchronous mode: episodes collected between training rounds."""
+    """Asynchronous mode: episodes collected between training rounds, ≥ 1."""
     updates_per_round: int = 2
-    """Gradient updates per training round (per iteration in synchronous mode)."""
+    """Gradient updates per training round (per iteration in synchronous mode), ≥ 1."""
 
     def __post_init__(self) -> None:
         check_types(self)
@@ -263,22 +263,22 @@ class EvalConfig:
     eval_every: int = 500
     """Training episodes between greedy evaluations (0 disables them until the end)."""
     eval_episodes: int = 50
-    """Greedy episodes per evaluation, on held-out seeds."""
+    """Greedy episodes per evaluation, on held-out seeds, ≥ 1."""
     final_eval_episodes: int = 200
     """Greedy episodes of the final evaluation at the end of the run (200: a win rate near
     0.9 is then known to about ±0.04)."""
     eval_seed: int = 1_000_000_000
     """First held-out seed; training episodes use seeds below it. Periodic evaluations
     (validation) use ``eval_seed + k``; the final evaluation (test) uses
-    ``eval_seed + TEST_SEED_OFFSET + k``, so the figures reported at the end never come from
-    the seeds that chose the best weights."""
+    ``eval_seed + 10,000,000 + k`` (``TEST_SEED_OFFSET``), so the figures reported at the
+    end never come from the seeds that chose the best weights."""
     keep_best: bool = True
     """Keep the weights of the best periodic evaluation, write them to ``best.pt`` and
     evaluate them on the test seeds at the end beside the final weights (model selection
     on validation seeds, as is usual when reporting greedy win rates). Equal readings go to
     the later weights, which trained longer."""
     checkpoint_every: int = 1000
-    """Training episodes between checkpoints (one is always written at the end)."""
+    """Training episodes between checkpoints, ≥ 1 (one is always written at the end)."""
     eval_contexts: str = ""
     """The fixed reset contexts of every evaluation beyond the run's ``level``, as
     ``key=value`` entries separated by ``;`` (no sets or ranges: every evaluation meets the
@@ -336,10 +336,10 @@ class ClusterConfig:
     base_port: int = 0
     """env=remote: 0 (the default) gives every worker a private server on a free port, so
     runs never collide; a port P makes worker i use the server on P + i (a fleet started
-    with ``neuronsmae-serve --base-port P --arenas envs_per_worker``), launching one there
-    if none answers."""
+    with ``neuronsmae-serve --base-port P --arenas envs_per_worker --time-scale 0``;
+    without ``--time-scale 0`` a fleet is paced at 100x), launching one there if none answers."""
     max_worker_failures: int = 5
-    """Consecutive failures after which a worker is given up instead of restarted."""
+    """Consecutive failures after which a worker is given up instead of restarted, ≥ 1."""
     groups: int = 1
     """env=remote: groups a worker's arenas are split into, in [1, envs_per_worker], stepped
     in turn (the server steps one group while the worker chooses the other's actions). 2

@@ -71,7 +71,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-graphics",
         action="store_true",
-        help="accepted for compatibility; the arena always runs headless",
+        help="accepted for compatibility and ignored; a 3-D window opens only with the gui "
+        "option (docs/options.md)",
     )
     p.add_argument(
         "--host",

@@ -132,7 +132,7 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _common(p)
     p.add_argument(
-        "--seed", type=int, default=1234, help="seed of server 0's first arena; +1 per arena"
+        "--seed", type=int, default=1234, help="seed of server 0's first arena; +1 per arena (1234)"
     )
     p.add_argument(
         "--arenas",
@@ -141,7 +141,10 @@ def _run_parser() -> argparse.ArgumentParser:
         help="arenas per server, stepped together by one vector request (1)",
     )
     p.add_argument(
-        "--time-scale", type=float, default=100.0, help="servers' pace cap; 0 = unlimited"
+        "--time-scale",
+        type=float,
+        default=100.0,
+        help="servers' pace cap; 0 = unlimited (100, the released build's)",
     )
     p.add_argument("--lease", type=float, default=60.0, help="servers' ownership lease (60)")
     p.add_argument("--interval", type=float, default=2.0, help="seconds between checks (2)")

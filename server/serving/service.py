@@ -159,8 +159,10 @@ def warm_up(factory: Callable[..., ArenaAPI], seed: int = 0) -> None:
 
 
 def _options_key(options: dict[str, Any]) -> bytes:
-    """A canonical form of options for comparing configurations exactly."""
-    return encode(sorted(options.items()))
+    """A canonical form of options for comparing configurations: every option with its
+    default filled in, so ``{}`` and ``{"action_space": "abstract"}`` are the same task
+    (an invalid option raises :class:`InvalidOptionError` here, before anything changes)."""
+    return encode(sorted(ArenaConfig.from_options(options).to_dict().items()))
 
 
 class ArenaService:

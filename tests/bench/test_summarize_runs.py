@@ -46,6 +46,20 @@ def test_summary_keeps_settings_counters_tests_and_curve(tmp_path: Path) -> None
     assert s["config"] == {"alg": "vdn", "level": "easy", "seed": 3, "arena": {"n_blue": 3}}
 
 
+def test_a_run_extended_after_its_test_reports_its_last_test(tmp_path: Path) -> None:
+    """A run resumed with more episodes is tested again: counters and figures of that test."""
+    run = _run(tmp_path)
+    with (run / "eval.csv").open() as f:
+        first = list(csv.DictReader(f))
+    again = [{**r, "episodes": 1300, "env_steps": 52000, "win_rate": 0.9}
+             for r in first if r["split"] == "test" and r["contexts"] == "main"]  # fmt: skip
+    _write(run / "eval.csv", EVAL_COLUMNS, first + again)
+    s = summarize("var", run)
+    assert (s["episodes"], s["env_steps"]) == (1300, 52000)
+    assert set(s["test"]) == {"latest", "best"}  # the first test's extra context is not this one's
+    assert s["test"]["latest"]["win_rate"] == 0.9
+
+
 def test_an_unfinished_run_is_refused_by_name(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no test rows"):
         summarize("var", _run(tmp_path, finished=False))

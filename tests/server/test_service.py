@@ -100,6 +100,8 @@ def test_configure_rebuilds_exactly_when_needed(service: ArenaService) -> None:
     first = value(service, Reset(), "d")
     expected = Arena(seed=5).reset()
     assert all(np.array_equal(a, b) for a, b in zip(first, expected, strict=True))  # type: ignore[call-overload]
+    defaults = {"action_space": "abstract", "n_blue": 2}  # stating a default changes nothing
+    assert value(service, Configure(seed=5, options=defaults), "d")["rebuilt"] is False  # type: ignore[index]
     opts = {"action_space": "discrete"}
     assert value(service, Configure(seed=5, options=opts), "d")["rebuilt"] is True  # type: ignore[index]
     assert value(service, Get(what="env_info"), "d")["action_space"] == "discrete"  # type: ignore[index]
