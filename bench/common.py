@@ -148,11 +148,61 @@ non_negative = finite(0.0)
 """An argparse ``type`` for finite numbers of at least 0 (a budget where 0 means none)."""
 
 
-def free_port() -> int:
-    """A loopback TCP port nothing listens on right now."""
+PORT_BLOCK = range(24000, 28000)
+"""Where the benches and tests take loopback ports for the servers they start: below
+Linux's default ephemeral range (32768–60999), from which the kernel gives outgoing
+connections their ports (a port picked there can be taken by one before the server binds
+it), and above Ray's worker ports (10002–19999)."""
+
+
+def ephemeral_ports() -> range | None:
+    """The kernel's ephemeral port range (``net.ipv4.ip_local_port_range``), if readable."""
+    try:
+        low, high = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()
+        return range(int(low), int(high) + 1)
+    except (OSError, ValueError):
+        return None
+
+
+def port_is_free(port: int) -> bool:
+    """Nothing is bound to ``port`` on loopback right now."""
     with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def free_ports(count: int = 1, block: range = PORT_BLOCK) -> int:
+    """The first of ``count`` consecutive loopback ports in ``block`` that are free right
+    now, from a random start so that concurrent runs rarely meet. Raises ``RuntimeError``
+    when the block lies in the kernel's ephemeral range (whose ports an outgoing connection
+    may take at any time) or holds no such ports."""
+    ephemeral = ephemeral_ports()
+    if ephemeral is not None and block.start < ephemeral.stop and ephemeral.start < block.stop:
+        raise RuntimeError(
+            f"ports {block.start}-{block.stop - 1} overlap the kernel's ephemeral range "
+            f"{ephemeral.start}-{ephemeral.stop - 1} (net.ipv4.ip_local_port_range); "
+            "narrow that range or reserve the block (net.ipv4.ip_local_reserved_ports)"
+        )
+    starts = list(block[: len(block) - count + 1])
+    offset = int(np.random.default_rng().integers(len(starts)))
+    for base in starts[offset:] + starts[:offset]:
+        if all(port_is_free(base + i) for i in range(count)):
+            return base
+    raise RuntimeError(f"no {count} consecutive free ports in {block.start}-{block.stop - 1}")
+
+
+def free_port() -> int:
+    """A loopback port in :data:`PORT_BLOCK` that nothing is bound to right now (where the
+    kernel's ephemeral range covers the block, the kernel's pick)."""
+    try:
+        return free_ports(1)
+    except RuntimeError:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
 
 
 def commit() -> str:

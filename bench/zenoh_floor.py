@@ -104,21 +104,24 @@ def serve_zenoh(
     --busy-poll`` does. Before replying, spin ``hold_s`` (the core busy, its caches as the
     query left them) or step ``hold_arenas`` in-process arenas once (the core busy as a
     vector server's is, its caches full of the arenas' data); the reply then starts with
-    the CPU nanoseconds all such steps took so far (8 bytes, big-endian)."""
+    the CPU nanoseconds all holds took so far (8 bytes, big-endian). A spin runs until its
+    thread has spent ``hold_s`` of CPU, so a preempted spin still costs what it reports."""
     session = zenoh.open(server_config("127.0.0.1", port))
     hold = ArenaHold(hold_arenas) if hold_arenas > 0 else None
     filler = b"x" * max(reply_bytes - 8, 0)
+    spun = 0
     try:
         queryable = session.declare_queryable(KEY)
         while True:
             with next_query(queryable, busy_poll_s) as query:
-                end = time.perf_counter() + hold_s
-                while time.perf_counter() < end:
+                start = time.thread_time_ns()
+                end = start + int(hold_s * 1e9)
+                while time.thread_time_ns() < end:
                     pass
-                held = 0
+                spun += time.thread_time_ns() - start
                 if hold is not None:
                     hold()
-                    held = hold.held_ns
+                held = spun + (hold.held_ns if hold is not None else 0)
                 query.reply(KEY, held.to_bytes(8, "big") + filler, express=True)
     finally:
         session.close()
@@ -309,7 +312,7 @@ def held_floor(
 ) -> dict[str, Any]:
     """The vector path's floor: CPU µs per query to a server that holds each one for
     ``arenas`` in-process decisions, by thread, less the hold itself; and the CPU ratio it
-    alone allows ``bench_vector`` at that K. ``hold``: ``"spin"`` spins for as long as the
+    alone allows ``bench_vector`` at that K. ``hold``: ``"spin"`` spins for the CPU the
     decisions take (measured first, here); ``"arenas"`` has the server step ``arenas`` real
     arenas and subtracts the CPU those steps took (which the server reports)."""
     if hold not in HOLDS:
@@ -329,9 +332,8 @@ def held_floor(
     (client_main, client_other), (server_main, server_other) = (
         [seconds / pings * 1e6 for seconds in row] for row in split
     )
-    if hold == "arenas":
-        held_ns = int.from_bytes(last[:8], "big") - int.from_bytes(first[:8], "big")
-        hold_s = held_ns / 1e9 / pings
+    held_ns = int.from_bytes(last[:8], "big") - int.from_bytes(first[:8], "big")
+    hold_s = held_ns / 1e9 / pings  # the CPU the holds took, as the server measured it
     server_main -= hold_s * 1e6
     floor = client_main + client_other + server_main + server_other
     return {

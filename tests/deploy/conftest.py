@@ -21,7 +21,7 @@ ROUTER_SCRIPT = REPO / "deploy" / "run_router.py"
 
 TEST_PORTS = range(28000, 29000)
 """Where the tests of the fleet's state file and the router's defaults take their ports: a
-block of its own on a shared machine, apart from :data:`tests.ports.TEST_PORTS` that the
+block of its own on a shared machine, apart from :data:`tests.ports.PORT_BLOCK` that the
 other tests draw from."""
 
 

@@ -46,7 +46,8 @@ def _allowed(env: RM) -> list[int]:
 
 
 def test_client_reaches_server_only_through_router(spawn: Spawn) -> None:
-    r_port, a_port = free_ports(), free_ports()
+    r_port = free_ports(2)  # one block: two picks could meet
+    a_port = r_port + 1
     router_ep = f"tcp/127.0.0.1:{r_port}"
     router = _router(spawn, r_port)
     server = spawn(*server_cmd(a_port, "--router", router_ep), name="server")
@@ -87,9 +88,9 @@ def _answers(env: RM) -> bool:
 
 
 def test_rm_with_unreachable_router_never_launches() -> None:
-    port = free_ports()
+    port = free_ports(2)
     with pytest.raises(ServerUnavailableError, match="router"):
-        RM(port=port, router=f"tcp/127.0.0.1:{free_ports()}", timeout=2.0)
+        RM(port=port, router=f"tcp/127.0.0.1:{port + 1}", timeout=2.0)
     assert not listening(port)
 
 
@@ -101,7 +102,8 @@ def test_training_samples_through_the_router(spawn: Spawn, tmp_path: Path) -> No
     from neuronsmae.trainers.placement import sampler_placement
     from neuronsmae.trainers.train import train
 
-    r_port, base = free_ports(), free_ports(2)
+    r_port = free_ports(3)  # one block: two picks could meet
+    base = r_port + 1
     router_ep = f"tcp/127.0.0.1:{r_port}"
     values = {"env": "remote", "base_port": base, "router": router_ep, "envs_per_worker": 2}
     placed = sampler_placement(make_config(values), 2, 0, {"n_blue": 2})

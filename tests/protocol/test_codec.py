@@ -210,7 +210,7 @@ def test_hostile_lengths_and_garbage_are_refused(payload: bytes) -> None:
         decode(payload, max_bytes=10_000)
 
 
-@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=512))
 def test_random_bytes_decode_or_fail_typed(data: bytes) -> None:
     with contextlib.suppress(MalformedMessageError, MessageTooLargeError):
@@ -238,7 +238,7 @@ values = st.recursive(
 )
 
 
-@settings(max_examples=100, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(values)
 def test_random_structures_round_trip(value: object) -> None:
     assert same(value, decode(encode(value), max_bytes=1 << 20))
@@ -382,7 +382,7 @@ plain_values = st.recursive(
 )
 
 
-@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     st.dictionaries(
         st.sampled_from(
