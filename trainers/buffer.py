@@ -5,10 +5,15 @@ Recurrent agents must be trained on whole sequences, so the unit of storage is t
 decision), so each is padded to ``episode_limit`` and carries masks:
 
 * ``filled [T]`` — 1 for real decision steps, 0 for padding after the episode ended;
-* ``terminated [T]`` — 1 on the last step of an episode that ended (no bootstrapping);
+* ``terminated [T]`` — 1 on the last step of an episode that ended (no bootstrapping).
+  Every episode ends so, the time limit included: the referee decides the winner by HP at
+  the limit and pays its ±20 then, and the time is in the observation and the state, so the
+  limit is part of the game, not a cut of it. (The Gymnasium and PettingZoo faces report
+  it as ``truncated``, with SMAC's ``episode_limit``, for learners that bootstrap there.)
 * ``alive [T+1, n]`` — 1 while the robot is alive: a destroyed robot can only take its
   no-op, so its Q carries no information; the learner zeroes it in the mixer's input and
-  drops it from IQL's per-agent loss.
+  drops it from IQL's per-agent loss, and IQL ends a robot's own return (one-step and
+  λ-return alike) at its destruction.
 
 An :class:`Episode` is validated before it is stored, so a partial episode from a worker
 whose env died mid-run can never enter the buffer. Batches are drawn uniformly (the paper's

@@ -233,9 +233,12 @@ class QLearner:
                 target_max = target_all.masked_fill(~avail_next, float("-inf")).max(-1).values
             target_max = torch.nan_to_num(target_max, neginf=0.0) * batch.alive[:, 1:]
             target_tot = self.target_mixer(target_max, batch.state[:, 1:])  # [B, T, 1 or n]
+            ended = batch.terminated.unsqueeze(-1)  # [B, T, 1]
+            if not self.mixer.team_output:  # IQL: a robot's own episode ends at its destruction
+                ended = torch.maximum(ended, 1.0 - batch.alive[:, 1:])  # [B, T, n]
             targets = lambda_returns(
                 batch.rewards.unsqueeze(-1),
-                batch.terminated.unsqueeze(-1),
+                ended,
                 target_tot,
                 self.gamma,
                 self.td_lambda,

@@ -116,3 +116,38 @@ def test_lambda_returns_by_hand() -> None:
     g1 = 2 + g * ((1 - lam) * 20 + lam * g2)
     g0 = 1 + g * ((1 - lam) * 10 + lam * g1)
     assert lambda_returns(r, d, v, g, lam).flatten().tolist() == pytest.approx([g0, g1, g2])
+
+
+@pytest.mark.parametrize("mixer", ["none", "vdn"])
+def test_a_destroyed_robot_s_own_returns_end_at_its_destruction_for_iql(
+    mixer: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """IQL cut a dead robot's one-step bootstrap but not its λ-return, which went on adding
+    the team's later rewards (a target of 19.6 where 0 was meant, at λ = 1)."""
+    import neuronsmae.trainers.learner as learner_module
+
+    seen: list[torch.Tensor] = []
+    real = learner_module.lambda_returns
+
+    def spy(r: torch.Tensor, d: torch.Tensor, *rest: object) -> torch.Tensor:
+        seen.append(d.clone())
+        return real(r, d, *rest)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(learner_module, "lambda_returns", spy)
+    rng = np.random.default_rng(4)
+    buf = EpisodeReplayBuffer(1, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    ep = make_episode(3, rng, dead_from=1)  # agent 1 acts at step 0, then is destroyed
+    ep.rewards[:] = [0.0, 0.0, 20.0]
+    buf.add(ep)
+    _learner(mixer, td_lambda=1.0).train(buf.sample(1, rng))
+    ended = seen[0][0, :3]
+    if mixer == "none":  # per robot: agent 1's episode ends at step 0, agent 0's at step 2
+        assert ended.tolist() == [[0.0, 1.0], [0.0, 1.0], [1.0, 1.0]]
+    else:  # the team's return: the team's episode goes on
+        assert ended.tolist() == [[0.0], [0.0], [1.0]]
+    r = torch.tensor([[0.0, 0.0, 20.0]]).unsqueeze(-1)
+    v = torch.full((1, 3, 2), 5.0)
+    g = lambda_returns(r, seen[0][:, :3], v, 0.9, 1.0) if mixer == "none" else None
+    if g is not None:
+        assert g[0, 0, 1] == 0.0  # nothing after its destruction reaches the dead robot
+        assert g[0, 0, 0] == pytest.approx(0.9 * 0.9 * 20.0)
