@@ -11,7 +11,10 @@ valid episode after any of them:
   spawn ranges to within 12 cm), and so are the physics and the bots: every position
   ``(x, y)`` becomes ``(−x, −y)`` in the normalised frame and every yaw gains π. The
   ``relative`` features are built from differences of positions and of angles, so they do
-  not change at all.
+  not change. Each enemy's candidate points are then listed again in the environment's
+  order (by angle from +x, which the half turn shifts by π), with the abstract actions that
+  name them (:mod:`~neuronsmae.trainers.point_order`); so abstract actions need the points
+  in the observation.
 * ``allies`` swaps the two learning agents. Observations are egocentric (self first), so
   each agent keeps its own observation; only their order, and the blue rows of the global
   state, change.
@@ -40,6 +43,7 @@ import torch
 from neuronsmae.protocol.env_info import EnvInfo, StateLayout
 from neuronsmae.trainers.buffer import Batch
 from neuronsmae.trainers.features import Relative, feature_dim, get_features
+from neuronsmae.trainers.point_order import PointOrder
 
 GENERATORS = ("enemies", "field", "allies")
 """Names of the symmetries :func:`task_group` can combine."""
@@ -91,6 +95,9 @@ class Symmetry:
     """``[A]`` int64: the new label of each action."""
     agents: torch.Tensor
     """``[n]`` int64: the agent each new agent slot comes from."""
+    points: PointOrder | None = None
+    """After the maps above, list the candidate points in the environment's order again
+    (an element that turns the field, in a task with the points in its observation)."""
 
     def then(self, other: Symmetry) -> Symmetry:
         return Symmetry(
@@ -99,6 +106,7 @@ class Symmetry:
             self.state.then(other.state),
             other.actions[self.actions],
             self.agents[other.agents],
+            self.points or other.points,
         )
 
 
@@ -144,7 +152,9 @@ def _enemies(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
 
 
 def _field(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
-    del relative  # built from differences of positions and of angles: unchanged
+    # The relative features are built from differences of positions and of angles: only
+    # their per-point blocks move, with the points.
+    points = PointOrder(info, relative) if info.obs.k else None
 
     def half_turn(size: int, xy: Sequence[int], yaw: Sequence[int]) -> ColumnMap:
         sign, turn = torch.ones(size), torch.zeros(size, dtype=torch.bool)
@@ -154,7 +164,8 @@ def _field(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
 
     obs = half_turn(width, info.obs.xy_columns(), info.obs.yaw_columns())
     state = half_turn(info.state_shape, info.state.xy_columns(), info.state.yaw_columns())
-    return Symmetry("field", obs, state, torch.arange(info.n_actions), torch.arange(info.n_agents))
+    actions, agents = torch.arange(info.n_actions), torch.arange(info.n_agents)
+    return Symmetry("field", obs, state, actions, agents, points)
 
 
 def _allies(info: EnvInfo, relative: Relative | None, width: int) -> Symmetry:
@@ -222,6 +233,9 @@ def _check_task(generators: Sequence[str], info: EnvInfo) -> None:
         "the cooperative mode": info.mode == "cooperative" and info.n_agents == info.team_size,
         "poses in the observation and no LiDAR": info.obs.vector and not info.obs.lidar_beams,
         "abstract or discrete actions": info.action_space in ("abstract", "discrete"),
+        "the candidate points in the observation": "field" not in generators
+        or info.action_space != "abstract"
+        or info.obs.k > 0,
         "two enemies": "enemies" not in generators or info.n_enemies == 2,
         "two agents": "allies" not in generators or info.n_agents == 2,
     }
@@ -243,16 +257,19 @@ def transform(batch: Batch, g: Symmetry) -> Batch:
     """``batch`` as it reads after the symmetry ``g`` (every episode alike)."""
     agents, relabel = g.agents, g.actions
     inverse = torch.argsort(relabel)  # avail'[..., relabel[a]] = avail[..., a]
+    obs = g.obs.apply(batch.obs[:, :, agents])
+    avail = batch.avail[:, :, agents][..., inverse]
+    actions = relabel[batch.actions[:, :, agents]]
+    if g.points is not None:
+        obs, avail, actions = g.points.relist(obs, avail, actions)
     return replace(
         batch,
-        obs=g.obs.apply(batch.obs[:, :, agents]),
+        obs=obs,
         state=g.state.apply(batch.state),
-        avail=batch.avail[:, :, agents][..., inverse],
+        avail=avail,
         alive=batch.alive[:, :, agents],
-        actions=relabel[batch.actions[:, :, agents]],
-        last_actions=torch.where(
-            batch.last_actions >= 0, relabel[batch.last_actions.clamp(min=0)], -1
-        )[:, :, agents],
+        actions=actions,
+        last_actions=torch.cat([batch.last_actions[:, :1], actions], dim=1),
     )
 
 
