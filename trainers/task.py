@@ -158,8 +158,10 @@ def blue_view(info: EnvInfo) -> EnvInfo:
 def _auto_generators(info: EnvInfo, observability: str, spawn: str) -> str:
     """Every symmetry the task has (trainers/symmetry.py): none in competitive mode (a
     policy on red reads robots by index), none with LiDAR; ``field`` needs random spawns
-    (corners are not turned into each other) and full observability (a half turn would
-    negate the unseen padding); ``enemies`` two enemies, ``allies`` two agents."""
+    (corners are not turned into each other), full observability (a half turn would
+    negate the unseen padding) and, with abstract actions, the candidate points in the
+    observation (to list them again in the environment's order); ``enemies`` two enemies,
+    ``allies`` two agents."""
     ok = (
         info.mode == "cooperative"
         and info.obs.vector
@@ -170,7 +172,9 @@ def _auto_generators(info: EnvInfo, observability: str, spawn: str) -> str:
         return "none"
     wanted = {
         "enemies": info.n_enemies == 2,
-        "field": spawn == "random" and observability == "full",
+        "field": spawn == "random"
+        and observability == "full"
+        and (info.action_space != "abstract" or info.obs.k > 0),
         "allies": info.n_agents == 2,
     }
     chosen = [name for name in GENERATORS if wanted[name]]

@@ -54,6 +54,7 @@ def test_the_competitive_task_is_seen_from_blue() -> None:
         ({"observability": "partial"}, ("partial", "random"), ("relative", "points",
                                                                "enemies,allies")),
         ({"spawn": "corners"}, ("full", "corners"), ("relative", "points", "enemies,allies")),
+        ({"candidate_obs": False}, ("full", "random"), ("raw", "flat", "enemies,allies")),
         ({"lidar": True}, ("full", "random"), ("relative", "points", "none")),
         ({"lidar": True, "vector_obs": False}, ("full", "random"), ("raw", "flat", "none")),
         ({"mode": "competitive"}, ("full", "random"), ("relative", "points", "none")),
