@@ -235,10 +235,17 @@ class Trainer:
             self.starts.load_state_dict(payload["starts"])
         self.competition.resume(payload.get("opponents"))
         best = self.run_dir / BEST_NAME
+        done = self.counters.episodes
         if self.cfg.eval.keep_best and best.is_file():
             chosen = load_checkpoint(best)
-            self.best = (policy_weights(chosen["learner"]), chosen["selection"])
-        done = self.counters.episodes
+            if chosen["selection"]["episodes"] <= done:
+                self.best = (policy_weights(chosen["learner"]), chosen["selection"])
+            else:  # chosen in the stretch after the checkpoint, which is trained again
+                aside = best.with_name(f"{BEST_NAME}.after-checkpoint")
+                best.replace(aside)
+                at = chosen["selection"]["episodes"]
+                log.warning("%s was chosen at %d episodes, after the checkpoint's %d: moved to %s",
+                            best, at, done, aside.name)  # fmt: skip
         dropped = trim_records(self.run_dir, done, redo_final=done >= self.cfg.episodes)
         log.info("resumed %s at %d episodes (%d record rows after the checkpoint dropped)",
                  self.run_dir, done, dropped)  # fmt: skip
@@ -468,6 +475,7 @@ class Trainer:
         better = self.best is None or row["win_rate"] >= self.best[1]["win_rate"]
         if split == "validation" and cfg.eval.keep_best and better:
             self.best = (evaluated.weights, row)
+            self.checkpoint()  # first: best.pt never runs ahead of the point a resume takes
             self._save_best()
         return row
 

@@ -390,6 +390,37 @@ def test_a_crashed_then_stopped_run_resumes_with_every_episode_recorded_once(
         Trainer(cfg, resume=True)
 
 
+def test_the_best_weights_never_run_ahead_of_the_checkpoint_a_resume_takes(
+    tmp_path: Path,
+) -> None:
+    """best.pt was written at each new best validation, checkpoint.pt only every
+    checkpoint_every episodes: a run killed between them resumed with best weights (and a
+    'chosen at' row) from the stretch it then trained again."""
+    cfg = make_config(
+        {"alg": "vdn", "workers": 1, "episodes": 12, "out": str(tmp_path), "progress": False},
+        dict(kv.split("=") for kv in TINY),
+        {"checkpoint_every": 100, "eval_every": 4},
+    )
+
+    def crash(trainer: Trainer) -> None:
+        if trainer.counters.episodes >= 6:  # after the first validation, long before 100
+            raise RuntimeError("the machine went down")
+
+    with pytest.raises(RuntimeError, match="went down"):
+        Trainer(cfg, hook=crash).run()
+    best = torch.load(tmp_path / "best.pt", weights_only=True)
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)  # none was, before
+    assert best["selection"]["episodes"] <= saved["counters"]["episodes"]
+
+    best["selection"]["episodes"] = 99  # as an older version could leave it
+    torch.save(best, tmp_path / "best.pt")
+    result = Trainer(cfg, resume=True).run()
+    assert (tmp_path / "best.pt.after-checkpoint").is_file()  # set aside, not trusted
+    assert result["best"]["chosen_at_episodes"] <= 12
+    chosen = torch.load(tmp_path / "best.pt", weights_only=True)["selection"]["episodes"]
+    assert chosen == result["best"]["chosen_at_episodes"]
+
+
 def test_a_trainer_runs_once_and_one_that_never_ran_leaves_no_run_behind(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
