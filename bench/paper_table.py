@@ -8,7 +8,8 @@
 learner, hyper-parameters, loop and contexts at its budget of 30,000 episodes, then tests
 the final weights on 200 held-out episodes at coef 1.0 (the reported figure) and at 1.5.
 ``--learner defaults`` trains with this project's own learner under a 30-minute budget
-(VDN by default: ``--algs vdn``), tested the same way (coef 1.0, and 1.5 for comparison).
+(VDN by default: ``--algs vdn``), tested on the same starts at coef 1.0 and 1.5, at its own
+friction (μ 0.1, the default contexts; the paper preset's runs are tested at its μ 0.5).
 
 Cells run one at a time, seed-major (every cell's first seed before any second seed), so a
 partial table covers every cell early. Each run has its own directory under ``--runs``; a
@@ -64,6 +65,7 @@ from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import evaluate_checkpoint
 from neuronsmae.trainers.interrupt import TrainingInterrupted
 from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
+from neuronsmae.trainers.records import read_records
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
 
 ALGS = ("iql", "vdn", "qmix")
@@ -194,20 +196,56 @@ def set_aside(run_dir: Path) -> Path:
     return aside
 
 
+def finished_result(run_dir: Path, saved: dict[str, Any]) -> dict[str, Any]:
+    """What ``train`` returned for a finished run, read back from its checkpoint and the
+    final tests in its ``eval.csv`` (the final weights' rows at its last episode count)."""
+    episodes = saved["counters"]["episodes"]
+    needs = ("episodes", "split", "weights", "contexts", "eval_episodes", *TEST_FIELDS)
+    rows = [
+        r for r in read_records(run_dir / "eval.csv", needs)
+        if (r["split"], r["weights"]) == ("test", "latest")
+        and int(float(r["episodes"])) == episodes
+    ]  # fmt: skip
+    tests = {
+        r["contexts"]: {k: float(r[k]) for k in TEST_FIELDS}
+        | {"eval_episodes": int(float(r["eval_episodes"]))}
+        for r in rows
+    }
+    if "main" not in tests:
+        raise ValueError(
+            f"{run_dir}: its checkpoint is finished at {episodes} episodes but eval.csv holds "
+            "no final test at that count; move the folder aside to train the cell again"
+        )
+    main_test = tests.pop("main")
+    return {"final": main_test, "extra_tests": tests, "counters": saved["counters"],
+            "run_dir": str(run_dir)}  # fmt: skip
+
+
 def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[str, Any]:
     run_dir = args.runs / args.learner / f"{alg}_{level}_s{seed}"
     cfg = cell_config(args, alg, level, seed, run_dir)
-    if run_dir.exists() and (cfg.max_minutes > 0 or not (run_dir / CHECKPOINT_NAME).is_file()):
+    saved = load_checkpoint(run_dir) if (run_dir / CHECKPOINT_NAME).is_file() else None
+    if (
+        saved is not None
+        and saved.get("finished")
+        and (cfg.max_minutes > 0 or saved["counters"]["episodes"] >= cfg.episodes)
+    ):
+        # Trained and tested, but the table stopped before recording it: record it as is.
+        print(f"recording {run_dir}, finished before it was recorded", flush=True)
+        result = finished_result(run_dir, saved)
+    elif run_dir.exists() and (cfg.max_minutes > 0 or saved is None):
         # A time budget is per session: a resumed run would train past it; a run stopped
         # before its first checkpoint cannot be continued. Either starts afresh.
         print(f"{run_dir} cannot be resumed: moved to {set_aside(run_dir)}", flush=True)
-    resume = (run_dir / CHECKPOINT_NAME).is_file()
-    if resume:
-        done = load_checkpoint(run_dir)["counters"]["episodes"]
-        print(f"resuming {run_dir} at {done} episodes", flush=True)
+        print(f"starting {run_dir}", flush=True)
+        result = train(cfg)
+    elif saved is not None:
+        print(f"resuming {run_dir} at {saved['counters']['episodes']} episodes", flush=True)
+        result = train(cfg, resume=True)
     else:
         print(f"starting {run_dir}", flush=True)
-    line = record(args, alg, level, seed, train(cfg, resume=resume))
+        result = train(cfg)
+    line = record(args, alg, level, seed, result)
     # Relative to the table's own folder, so the record stays true wherever the table and
     # its ``_runs`` folder are copied together (a run on another machine, into docs/data).
     line["logs"] = (
@@ -295,8 +333,8 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
     then what is recorded and the compute it took."""
     records = table["records"]
     lines = [
-        "| level | alg | paper | `--preset paper`, coef 1.0 | `--preset paper`, coef 1.5 "
-        "| project's learner, coef 1.0 |",
+        "| level | alg | paper | `--preset paper` (μ 0.5), coef 1.0 | `--preset paper` (μ 0.5), "
+        "coef 1.5 | project's learner (μ 0.1), coef 1.0 |",
         "|---|---|---|---|---|---|",
     ]
     for level in LEVELS:
@@ -333,8 +371,8 @@ def _retests(done: list[dict[str, Any]]) -> list[str]:
     extra = sorted({k for r in done for k in r["test"]} - {"main", "coef=1.5"})
     if not extra:
         return []
-    head = " | ".join(f"`--preset paper`, {k}" for k in extra)
-    lines = ["", f"| level | alg | `--preset paper`, coef 1.0 | {head} |"]
+    head = " | ".join(f"`--preset paper` (μ 0.5), {k}" for k in extra)
+    lines = ["", f"| level | alg | `--preset paper` (μ 0.5), coef 1.0 | {head} |"]
     lines.append("|---|---|---|" + "---|" * len(extra))
     for level in LEVELS:
         for alg in ALGS:

@@ -68,7 +68,9 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
     assert "coef=0.5" not in report({"records": records})
     records[0]["test"]["coef=0.5"] = {"win_rate": 1.0}
     lines = report({"records": records}).splitlines()
-    assert "| level | alg | `--preset paper`, coef 1.0 | `--preset paper`, coef=0.5 |" in lines
+    paper = "`--preset paper` (μ 0.5)"
+    head = f"| level | alg | {paper}, coef 1.0 | {paper}, coef=0.5 |"
+    assert head in lines
     row = next(line for line in lines[-10:] if line.startswith("| easy | VDN"))
     assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.0
     assert row.split("|")[4].strip() == "1.000 (s1 1.000; 1 of 2 seeds)"  # s2 not yet

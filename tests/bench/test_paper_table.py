@@ -59,4 +59,42 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     (line,) = json.loads(out.read_text())["records"]
     assert line["test"]["coef=1.0"] == line["test"]["main"]
     assert main([*args, "--report"]) == 0
-    assert "| `--preset paper`, coef 1.0 | `--preset paper`, coef=1.0 |" in capsys.readouterr().out
+    head = "| `--preset paper` (μ 0.5), coef 1.0 | `--preset paper` (μ 0.5), coef=1.0 |"
+    assert head in capsys.readouterr().out
+
+
+def test_a_run_finished_but_not_recorded_is_recorded_without_training_again(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Stopped between the run's final test and its record, the table refused the cell on
+    every later command ("finished its 40 episodes")."""
+    import bench.paper_table as table_module
+
+    runs, out = tmp_path / "runs", tmp_path / "table.json"
+    sets = [arg for kv in TINY for arg in ("--set", kv)]
+    args = ["--algs", "vdn", "--levels", "easy", "--seeds", "2", "--workers", "2"]
+    args += ["--runs", str(runs), "--out", str(out), *sets]
+    real = table_module.keep_logs
+
+    def disk_full(*a: object) -> Path:
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(table_module, "keep_logs", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        main(args)
+    assert not out.exists()
+    run_dir = runs / "paper" / "vdn_easy_s2"
+    before = (run_dir / "checkpoint.pt").stat().st_mtime_ns
+    monkeypatch.setattr(table_module, "keep_logs", real)
+    assert main(args) == 0
+    assert "recording" in capsys.readouterr().out
+    assert (run_dir / "checkpoint.pt").stat().st_mtime_ns == before  # not trained again
+    (line,) = json.loads(out.read_text())["records"]
+    assert line["episodes"] == 40 and set(line["test"]) == {"main", "coef=1.5"}
+    with (run_dir / "eval.csv").open() as f:
+        import csv
+
+        final = [r for r in csv.DictReader(f) if r["split"] == "test" and r["weights"] == "latest"
+                 and r["contexts"] == "main"]  # fmt: skip
+    assert line["test"]["main"]["win_rate"] == float(final[-1]["win_rate"])
+    assert line["test"]["main"]["episodes"] == 3
