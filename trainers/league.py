@@ -214,7 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bots", default="easy,middle,hard",
                    help="comma list of bot levels; '' for none (easy,middle,hard)")  # fmt: skip
     p.add_argument("--games", type=int, default=20, help="episodes per pair, half each colour")
-    p.add_argument("--seed", type=int, default=0, help="first episode seed (0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="first episode seed, then +1 per episode (0); for trained checkpoints, "
+                   "seeds their runs never trained on, e.g. 1010000000")  # fmt: skip
     p.add_argument("--arenas", type=int, default=8, help="arenas played at once (8)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, nargs="+", help="play on the server(s) at these ports")

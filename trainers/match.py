@@ -379,7 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--blue", default="hard", help=side)
     p.add_argument("--red", default="easy", help=side)
     p.add_argument("--episodes", type=int, default=200)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="first episode seed, then +1 per episode (0); for trained checkpoints, "
+                   "seeds their runs never trained on, e.g. 1010000000")  # fmt: skip
     p.add_argument("--arenas", type=int, default=8, help="arenas played at once (8)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, nargs="+", help="play on the server(s) at these ports")

@@ -149,3 +149,19 @@ def test_sampled_hits_average_to_expected() -> None:
         total += lost
     assert 0.3 * 200 < total < 0.7 * 200  # p = 0.5 at 4.5 m, 200 shots
     a.close()
+
+
+def test_both_teams_destroyed_in_one_step_is_a_draw() -> None:
+    """Every shot of a step lands together, so both teams can fall at once (docs/reference.md)."""
+    from neuronsmae.server.sim.referee import Referee
+
+    ref = Referee(2, 2, np.random.default_rng(0), sampled=False)
+    ref.alive[:] = False
+    ref.hp[:] = 0.0
+    ref.after_kills()
+    assert ref.check_end(10, 50) and ref.winner == "draw"
+    ref.reset(np.full(4, 600.0), coef=1.0)
+    ref.alive[2:] = False
+    ref.hp[2:] = 0.0
+    ref.after_kills()
+    assert ref.check_end(10, 50) and ref.winner == "blue"
