@@ -113,7 +113,8 @@ class TrainConfig:
     [0, 2³²−1] (NumPy's, Python's and torch's generators all take it as it is)."""
     episodes: int = 30_000
     """Training episodes in total, ≥ 1 (a resumed run continues until this many). The default
-    is the paper's budget (20 workers × 1,501 iterations); on a 2-core machine
+    is the paper's budget (20 workers × 1,501 iterations = 30,020, rounded down to 1,500
+    iterations); on a 2-core machine
     ``max_minutes`` ends the run long before it."""
     max_minutes: float = 30.0
     """Wall-clock budget of this invocation's training in minutes (0: none; a resumed run gets a
@@ -129,9 +130,10 @@ class TrainConfig:
     """Each training episode's reset contexts beyond ``level``, drawn per episode: ``;``
     -separated entries ``key=value`` (fixed), ``key=v1,v2,...`` (a uniform choice) or
     ``key=lo..hi`` (uniform in the range); keys as in docs/contexts.md. Empty: the
-    defaults (coef 1, the chassis defaults). The paper trained at
-    ``Friction_coeff=0.5;coef=0.5``; the released scripts randomised
-    ``coef=0.5,0.7,1,1.4,1.7,2``. See trainers/contexts.py."""
+    defaults (coef 1, the chassis defaults). The authors trained at coef 0.5 with the
+    released build's μ 0.5 for the learning team (``Friction_coeff=0.5;coef=0.5``, the
+    ``paper`` preset's), and also randomised ``coef=0.5,0.7,1,1.4,1.7,2``
+    (docs/reference.md, the context keys). See trainers/contexts.py."""
     workers: int = 0
     """Rollout workers (Ray actors); 0 means one per core less one for the learner, and at
     least two. Measured on 2 cores: two half-CPU workers beside the learner play 25 % more
@@ -298,9 +300,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 augmentation), its hyper-parameters (Adam 5e-4, γ 0.99, ε 0.2 → 0.05, gradient-norm clip
 10, GRU 128, QMIX mixer 32) and its loop whatever the worker count here: an iteration is 20
 episodes (its 20 sampling workers × 1 episode) followed by one gradient update, the target
-networks are refreshed every 5 iterations, and a run is 30,000 episodes (its 1,501
-iterations × 20). Its contexts: the learning team at μ 0.5 and coef 0.5 in training (the
-released training scripts), evaluation at coef 1.0 (the reported figure) and 1.5.
+networks are refreshed every 5 iterations, and a run is 30,000 episodes: 1,500 iterations
+of 20 (the paper's 1,501 iterations make 30,020; the last one, 0.07 % of the budget, is
+left out). Its contexts: the learning team at μ 0.5 (the released build's) and coef 0.5
+(the authors' training value) in training, evaluation at coef 1.0 (the reported figure)
+and 1.5 (docs/reference.md, the context keys).
 
 Where the paper is silent, the preset takes what its algorithms' reference code (PyMARL)
 does: ε falls linearly over 50,000 env steps (1,000 episodes of 50 decisions), QMIX's
