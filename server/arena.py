@@ -91,6 +91,9 @@ class Arena(ArenaAPI):
         self.stepper = Stepper(self.world, self.chassis, self.referee)
         self.planner = Planner(resolution=cfg.planner_resolution)
         self.zones = Zones(self.rng, cfg.n_blue, self.n) if cfg.zones else None
+        self._max_bullets = F.START_BULLETS + (
+            Zones.ammo_capacity(cfg.episode_steps) if cfg.zones else 0.0
+        )
         self.decoder = ActionDecoder(cfg.action_space, cfg.n_red, cfg.k, cfg.clip_actions)
         self.poses = np.zeros((self.n, 3))
         self.t = 0
@@ -138,7 +141,7 @@ class Arena(ArenaAPI):
         ]
         self.chassis.reset(params)
         max_hp = np.where(self.team == RED, ctx.opponent_hp, float(F.START_HP))
-        self.referee.reset(max_hp, ctx.coef)
+        self.referee.reset(max_hp, ctx.coef, self._max_bullets)
         if self.zones is not None:
             self.zones.rng = self.rng
             self.zones.reset()
@@ -213,7 +216,7 @@ class Arena(ArenaAPI):
         return O.global_state(
             O.norm_pose(self.poses),
             O.norm_hp(ref.hp, ref.max_hp),
-            O.norm_bullets(ref.bullets),
+            O.norm_bullets(ref.bullets, ref.max_bullets),
             O.norm_time(self.t, self.config.episode_steps),
         )
 
@@ -368,6 +371,7 @@ class Arena(ArenaAPI):
                 ref.hp,
                 ref.max_hp,
                 ref.bullets,
+                ref.max_bullets,
                 seen,
                 cfg.unseen_value,
                 vec,

@@ -213,7 +213,7 @@ def render_scene(arena: Arena) -> np.ndarray:
             rgb,
             poses[arena.targets[i], :2],
             ref.hp[i] / ref.max_hp[i],
-            ref.bullets[i] / F.START_BULLETS,
+            ref.bullets[i] / ref.max_bullets[i],
         )
         px, py = to_px(*poses[i, :2])
         label = arena.agent_name(i) + _penalties(arena, i)

@@ -64,14 +64,19 @@ class Referee:
         self.boxes = with_trig(np.concatenate([self.static_boxes, np.zeros((self.n, 6))]))
         self.reset(np.full(self.n, float(F.START_HP)), coef=1.0)
 
-    def reset(self, max_hp: np.ndarray, coef: float) -> None:
-        """Full HP and bullets; ``coef`` scales the damage red deals.
+    def reset(
+        self, max_hp: np.ndarray, coef: float, max_bullets: float = float(F.START_BULLETS)
+    ) -> None:
+        """Full HP and bullets; ``coef`` scales the damage red deals; ``max_bullets`` is the
+        most a robot can hold in the episode (the start's 370, more with the zones'
+        ammunition bonuses), which observations divide by.
 
         The per-robot arrays are rows of two packed arrays, ``fl`` (float, ``FL_*`` rows) and
         ``it`` (int, ``IT_*`` rows), so the per-step kernel takes few arguments; ``hp``,
         ``bullets`` and the rest are views into them (edit them in place, do not rebind).
         """
         self.max_hp = max_hp.astype(np.float64)
+        self.max_bullets = np.full(self.n, max_bullets)
         self.fl = np.zeros((6, self.n))
         self.it = np.zeros((3, self.n), dtype=np.int64)
         self.hp, self.bullets = self.fl[FL_HP], self.fl[FL_BULLETS]

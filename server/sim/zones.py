@@ -49,6 +49,13 @@ class Zones:
         self.hi = centres + half
         self.state = ZoneState()
 
+    @staticmethod
+    def ammo_capacity(episode_steps: int) -> float:
+        """The most bullets the ammunition bonuses can add to one robot in an episode of
+        ``episode_steps`` physics steps (one bonus per refresh it lasts into)."""
+        refreshes = sum(r < episode_steps * F.PHYSICS_DT for r in REFRESH_S)
+        return AMMO_BONUS * refreshes
+
     def reset(self) -> None:
         """Clear timers; effects are dealt at the first :meth:`update` (t = 0)."""
         self.state = ZoneState(no_shoot_until=np.zeros(self.n), no_move_until=np.zeros(self.n))

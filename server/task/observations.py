@@ -68,9 +68,10 @@ def norm_hp(hp: np.ndarray, max_hp: np.ndarray) -> np.ndarray:
     return 2.0 * hp / max_hp - 1.0
 
 
-def norm_bullets(bullets: np.ndarray) -> np.ndarray:
-    """Bullets over the 370 at the start, to [-1, 1]."""
-    return 2.0 * bullets / F.START_BULLETS - 1.0
+def norm_bullets(bullets: np.ndarray, max_bullets: np.ndarray) -> np.ndarray:
+    """Bullets over the most the robot can hold in the episode (the 370 at the start; with
+    zones, plus 100 per ammunition refresh the episode lasts into), to [-1, 1]."""
+    return 2.0 * bullets / max_bullets - 1.0
 
 
 def vector_obs_batch(
@@ -110,13 +111,14 @@ def _norm_yaw1(yaw: float) -> float:
 
 
 @numba.njit(cache=True)
-def vector_obs_kernel(order, n_team, poses, agents, cands, t_n, hp, max_hp, bullets, seen,
-                      unseen, out) -> None:  # fmt: skip
+def vector_obs_kernel(order, n_team, poses, agents, cands, t_n, hp, max_hp, bullets,
+                      max_bullets, seen, unseen, out) -> None:  # fmt: skip
     """:func:`vector_obs_batch` from raw values in one pass, into ``out`` (A, size).
 
-    ``poses`` (N, 3), ``hp``, ``max_hp``, ``bullets`` (N,) are the referee's raw values and
-    are normalised here with the same operations as :func:`norm_pose`, :func:`norm_hp` and
-    :func:`norm_bullets`, so the result is bit-identical to the array version; ``cands``
+    ``poses`` (N, 3), ``hp``, ``max_hp``, ``bullets``, ``max_bullets`` (N,) are the
+    referee's raw values and are normalised here with the same operations as
+    :func:`norm_pose`, :func:`norm_hp` and :func:`norm_bullets`, so the result is
+    bit-identical to the array version; ``cands``
     (N, E, k, 2) are every robot's raw candidate points (agent ``a`` reads robot
     ``agents[a]``'s), or an empty array for a layout without them; ``t_n`` is
     :func:`norm_time`. ``out`` may be float32: values are rounded once, as by ``astype``.
@@ -150,7 +152,7 @@ def vector_obs_kernel(order, n_team, poses, agents, cands, t_n, hp, max_hp, bull
         for j in range(n):
             r = order[a, j]
             out[a, c + j] = 2.0 * hp[r] / max_hp[r] - 1.0
-            out[a, c + n + j] = 2.0 * bullets[r] / F.START_BULLETS - 1.0
+            out[a, c + n + j] = 2.0 * bullets[r] / max_bullets[r] - 1.0
 
 
 def global_state(

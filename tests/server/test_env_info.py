@@ -49,7 +49,7 @@ def _check_observations(arena: Arena, obs: list[np.ndarray]) -> None:
                 np.testing.assert_allclose(got, poses[robot], atol=1e-6)
             hp = 2.0 * ref.hp[robot] / ref.max_hp[robot] - 1.0
             assert o[layout.hp_of(r)] == pytest.approx(hp, abs=1e-6)
-            bullets = O.norm_bullets(ref.bullets[robot])
+            bullets = O.norm_bullets(ref.bullets[robot], ref.max_bullets[robot])
             assert o[layout.bullets_of(r)] == pytest.approx(bullets, abs=1e-6)
         if layout.vector:
             time = O.norm_time(arena.t, cfg.episode_steps)
@@ -71,7 +71,9 @@ def _check_state(arena: Arena) -> None:
     for r in range(arena.n):
         np.testing.assert_allclose(state[list(layout.pose(r))], poses[r], atol=1e-6)
         assert state[layout.hp_of(r)] == pytest.approx(2.0 * ref.hp[r] / ref.max_hp[r] - 1.0)
-        assert state[layout.bullets_of(r)] == pytest.approx(O.norm_bullets(ref.bullets[r]))
+        assert state[layout.bullets_of(r)] == pytest.approx(
+            O.norm_bullets(ref.bullets[r], ref.max_bullets[r])
+        )
     assert state[layout.time] == pytest.approx(O.norm_time(arena.t, arena.config.episode_steps))
 
 

@@ -99,6 +99,7 @@ def test_observation_kernel_matches_the_array_version(partial: bool, with_cands:
         )
         hp, bullets = rng.uniform(0, 600, 5), rng.integers(0, 371, 5).astype(float)
         max_hp = np.array([600.0, 600.0, 300.0, 300.0, 300.0])
+        max_bullets = np.array([370.0, 370.0, 470.0, 470.0, 670.0])
         cands, _ = P.all_candidates(poses, np.ones(5, bool), a.enemies_of, 4, np.ones(5, bool))
         seen = rng.random((2, 3)) < 0.5 if partial else np.ones((2, 3), bool)
         order = a._agent_order
@@ -109,7 +110,7 @@ def test_observation_kernel_matches_the_array_version(partial: bool, with_cands:
             O.norm_xy(cands[a.agents, :3]) if with_cands else None,
             O.norm_time(17, 1000),
             O.norm_hp(hp, max_hp),
-            O.norm_bullets(bullets),
+            O.norm_bullets(bullets, max_bullets),
             seen,
             -0.5,
         ).astype(np.float32)
@@ -124,6 +125,7 @@ def test_observation_kernel_matches_the_array_version(partial: bool, with_cands:
             hp,
             max_hp,
             bullets,
+            max_bullets,
             seen,
             -0.5,
             got,

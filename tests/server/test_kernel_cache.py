@@ -88,19 +88,22 @@ import json, numba, numpy as np
 import neuronsmae
 from neuronsmae.server.task.observations import vector_obs_kernel
 out = np.empty((1, 11))
+poses = np.array([[4.04, 2.24, 0.0], [4.04, 2.24, 0.0]])
 vector_obs_kernel(
-    np.array([[0, 1]]), 1, np.zeros((2, 3)), np.array([0]), np.zeros((0, 1, 1, 2)), 0.0,
-    np.full(2, 600.0), np.full(2, 600.0), np.full(2, 185.0), np.ones((1, 1), bool), -1.0, out,
+    np.array([[0, 1]]), 1, poses, np.array([0]), np.zeros((0, 1, 1, 2)), 0.0,
+    np.full(2, 600.0), np.full(2, 600.0), np.full(2, 185.0), np.full(2, 370.0),
+    np.ones((1, 1), bool), -1.0, out,
 )
 print(json.dumps({
     "package": neuronsmae.__file__,
     "cache": numba.config.CACHE_DIR,
     "hits": sum(vector_obs_kernel.stats.cache_hits.values()),
-    "bullets": float(out[0, -1]),
+    "x": float(out[0, 0]),
 }))
 """
-"""Runs ``vector_obs_kernel``, whose bullet columns divide by ``START_BULLETS``, a constant of
-another file (``sim/field.py``): 185 bullets read 0.0 with 370 to start with."""
+"""Runs ``vector_obs_kernel``, whose position columns are centred on ``HALF_X``, half of
+``FIELD_X``, a constant of another file (``sim/field.py``): x = 4.04 reads 0.0 on the
+8.08 m field."""
 
 
 @pytest.mark.slow
@@ -124,15 +127,15 @@ def test_editing_a_dependency_recompiles_the_kernel(tmp_path: Path) -> None:
 
     first, again = probe(), probe()
     assert first["package"].startswith(str(tree))  # the copy ran, not the installed package
-    assert first["bullets"] == 0.0 and again["bullets"] == 0.0
+    assert first["x"] == 0.0 and again["x"] == 0.0
     assert first["hits"] == 0 and again["hits"] == 1  # compiled once, then read from the cache
     assert first["cache"] == again["cache"]
     field = tree / "neuronsmae/server/sim/field.py"
     text = field.read_text()
-    assert "START_BULLETS = 370\n" in text
-    field.write_text(text.replace("START_BULLETS = 370\n", "START_BULLETS = 185\n"))
+    assert "FIELD_X = 8.08\n" in text
+    field.write_text(text.replace("FIELD_X = 8.08\n", "FIELD_X = 4.04\n"))
     edited = probe()
-    assert edited["bullets"] == 1.0  # the new constant, not the cached kernel's
+    assert edited["x"] == 1.0  # the new constant, not the cached kernel's
     assert edited["hits"] == 0 and edited["cache"] != first["cache"]
 
 

@@ -93,3 +93,23 @@ def test_zones_off_by_default() -> None:
     _, _, _, info = a.step([0, 0])
     assert "zones" not in info
     a.close()
+
+
+@pytest.mark.parametrize("episode_steps", [1000, 3001, 6001])
+def test_observations_stay_in_range_with_every_ammunition_bonus(episode_steps: int) -> None:
+    """Bullets are divided by the most a robot can hold in the episode: 370, plus 100 per
+    refresh (0, 60, 120 s) the episode lasts into. By the 370 alone, a robot that took a
+    bonus before shooting read 1.43 where the layout promises [-1, 1]."""
+    cap = 370.0 + 100.0 * {1000: 1, 3001: 2, 6001: 3}[episode_steps]
+    for seed in range(6):
+        a = Arena(seed=seed, zones=True, episode_steps=episode_steps)
+        a.reset()
+        assert (a.referee.max_bullets == cap).all()
+        zones = F.ZONES
+        a.place(np.array([[*zones["F1"], 0.0], [*zones["F2"], 0.0], [*zones["F4"], np.pi],
+                          [*zones["F5"], np.pi]]))  # fmt: skip
+        obs, _, _, info = a.step([0, 0])
+        assert max(float(np.abs(o).max()) for o in obs) <= 1.0, info["zone_log"]
+        assert float(np.abs(a.get_state()).max()) <= 1.0
+        assert a.referee.bullets.max() <= cap
+    assert Arena(seed=0).referee.max_bullets.max() == 370.0  # without zones: as released
