@@ -61,7 +61,7 @@ ARENA_OPTIONS = frozenset(
         "action_space", "n_blue", "n_red", "mode", "blue_level", "decision_steps",
         "episode_steps", "k", "candidate_obs", "observability", "unseen_value",
         "camera_hfov_deg", "vector_obs", "lidar", "lidar_range", "reward", "spawn", "zones",
-        "gui", "hit_mode", "clip_actions", "planner_resolution",
+        "gui", "hit_mode", "time_limit_winner", "clip_actions", "planner_resolution",
     }
 )  # fmt: skip
 """The arena options (``Arena(seed, **options)``, docs/options.md); a test keeps this equal

@@ -87,7 +87,13 @@ class Arena(ArenaAPI):
         self._vec_size = O.obs_size(n_team, n_enemy, cfg.k, cfg.with_candidates, True, False)
         self.world = World(self.n, gui=cfg.gui, n_blue=cfg.n_blue)
         self.chassis = Chassis(self.n)
-        self.referee = Referee(cfg.n_blue, cfg.n_red, self.rng, cfg.hit_mode == "sampled")
+        self.referee = Referee(
+            cfg.n_blue,
+            cfg.n_red,
+            self.rng,
+            cfg.hit_mode == "sampled",
+            by_damage=cfg.time_limit_winner == "damage",
+        )
         self.stepper = Stepper(self.world, self.chassis, self.referee)
         self.planner = Planner(resolution=cfg.planner_resolution)
         self.zones = Zones(self.rng, cfg.n_blue, self.n) if cfg.zones else None

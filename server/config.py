@@ -27,6 +27,7 @@ OBSERVABILITY = ("full", "partial")
 REWARDS = ("dense", "sparse")
 SPAWNS = ("random", "corners")
 HIT_MODES = ("expected", "sampled")
+TIME_LIMIT_WINNERS = ("hp", "damage")
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,11 @@ class ArenaConfig:
     The physics is identical to headless; ``render()`` stays the top-down image."""
     hit_mode: str = "expected"
     """"expected" damage per firing step, or "sampled" hits with that probability."""
+    time_limit_winner: str = "hp"
+    """Who wins when time is up with both teams standing: "hp", the team with more HP left
+    (the released build), or "damage", the team that dealt more damage (the paper's text);
+    equal is a draw. The two agree unless the teams start with unequal HP (the
+    ``opponent_hp`` context) or the zones heal."""
     clip_actions: bool = False
     """Clip out-of-range continuous motion commands (vx, vy, omega) to their bounds instead
     of raising InvalidActionError. The target is a choice, not a command: one that is not an
@@ -95,6 +101,7 @@ class ArenaConfig:
             ("reward", REWARDS),
             ("spawn", SPAWNS),
             ("hit_mode", HIT_MODES),
+            ("time_limit_winner", TIME_LIMIT_WINNERS),
         ):
             if getattr(self, name) not in choices:
                 raise InvalidOptionError(

@@ -52,7 +52,16 @@ class StepTally:
 class Referee:
     """Keeps HP, bullets and the score for ``n_blue + n_red`` robots (blue first)."""
 
-    def __init__(self, n_blue: int, n_red: int, rng: np.random.Generator, sampled: bool) -> None:
+    def __init__(
+        self,
+        n_blue: int,
+        n_red: int,
+        rng: np.random.Generator,
+        sampled: bool,
+        by_damage: bool = False,
+    ) -> None:
+        self.by_damage = by_damage
+        """At the time limit, compare the damage each team dealt instead of its HP left."""
         self.n = n_blue + n_red
         self.n_blue = n_blue
         self.team = np.array([BLUE] * n_blue + [RED] * n_red, dtype=np.int64)
@@ -125,12 +134,10 @@ class Referee:
             return False
         if blue_alive != red_alive:
             self.winner = "blue" if blue_alive else "red"
-        else:
-            blue_hp = self.hp[self.team == BLUE].sum()
-            red_hp = self.hp[self.team == RED].sum()
-            self.winner = (
-                "draw" if np.isclose(blue_hp, red_hp) else ("blue" if blue_hp > red_hp else "red")
-            )
+        else:  # time is up with both standing, or both fell in one step (then HP: a draw)
+            score = self.damage_dealt if self.by_damage and blue_alive else self.hp
+            blue, red = score[self.team == BLUE].sum(), score[self.team == RED].sum()
+            self.winner = "draw" if np.isclose(blue, red) else ("blue" if blue > red else "red")
         return True
 
     def team_rewards(self, tally: StepTally, dense: bool) -> tuple[np.ndarray, dict[str, float]]:

@@ -165,3 +165,24 @@ def test_both_teams_destroyed_in_one_step_is_a_draw() -> None:
     ref.hp[2:] = 0.0
     ref.after_kills()
     assert ref.check_end(10, 50) and ref.winner == "blue"
+
+
+@pytest.mark.parametrize(("rule", "winner"), [("hp", "red"), ("damage", "blue")])
+def test_time_limit_winner_by_hp_left_or_by_damage_dealt(rule: str, winner: str) -> None:
+    """Red starts with 1000 HP; blue shoots red from behind for the one decision there is.
+    By HP left (the released build) red wins; by damage dealt (the paper's text) blue does."""
+    arena = Arena(seed=0, episode_steps=20, action_space="continuous", time_limit_winner=rule)
+    arena.reset({"opponent_hp": 1000.0})
+    arena.place(np.array([[2.0, 2.6, 0.0], [0.6, 0.6, 0.0], [3.5, 2.6, 0.0], [7.5, 0.6, 0.0]]))
+    _, _, done, info = arena.step([[0, 0, 0, 0], [0, 0, 0, 0]])
+    dealt = np.array(info["damage_dealt"])
+    assert done and dealt[:2].sum() > dealt[2:].sum() and sum(info["hp"][:2]) < sum(info["hp"][2:])
+    assert info["winner"] == winner
+    assert info["components"]["win"] == (20.0 if winner == "blue" else -20.0)
+
+
+def test_an_unknown_time_limit_rule_is_refused_naming_the_choices() -> None:
+    from neuronsmae.protocol.errors import InvalidOptionError
+
+    with pytest.raises(InvalidOptionError, match=r"time_limit_winner='kills'.*\('hp', 'damage'\)"):
+        Arena(time_limit_winner="kills")
