@@ -73,7 +73,8 @@ class ArenaConfig:
     reward: str = "dense"
     """"dense" (damage, kills, win) or "sparse" (win/loss only)."""
     spawn: str = "random"
-    """"random" (the released build) or "corners" (the RMUA birth areas)."""
+    """"random" (the released build) or "corners" (the RMUA birth areas: each robot within
+    0.15 m of its area's centre, facing the other side)."""
     zones: bool = False
     """Enable the RMUA bonus/penalty zones (the released build had them do nothing)."""
     gui: bool = False

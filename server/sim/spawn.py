@@ -52,15 +52,23 @@ def random_poses(n: int, rng: np.random.Generator, max_tries: int = 10_000) -> n
     raise RuntimeError(f"could not place {n} robots in {max_tries} tries")  # pragma: no cover
 
 
+BIRTH_JITTER = 0.15
+"""A robot in a birth area starts with its centre uniform within this many metres (in x and
+in y) of the area's centre: its footprint (0.60 × 0.46 m, facing along x) stays inside the
+1 × 1 m area, at least 5 cm from its edges, and episodes of different seeds start apart."""
+
+
 def corner_poses(n_blue: int, n_red: int, rng: np.random.Generator) -> np.ndarray:
     """RMUA birth areas: blue in the two left corners, red in the two right ones, facing the
-    other side. A third robot of a team starts at random in its own half."""
+    other side, each placed at random within :data:`BIRTH_JITTER` of its area's centre. A
+    third robot of a team starts at random in its own half."""
     blue_corners, red_corners = F.BIRTH_AREAS[:2], F.BIRTH_AREAS[2:]
     poses = []
     for count, corners, yaw in ((n_blue, blue_corners, 0.0), (n_red, red_corners, np.pi)):
         for i in range(count):
             if i < len(corners):
-                poses.append((corners[i][0], corners[i][1], yaw))
+                dx, dy = rng.uniform(-BIRTH_JITTER, BIRTH_JITTER, 2)
+                poses.append((corners[i][0] + dx, corners[i][1] + dy, yaw))
             else:
                 poses.append(_random_in_half(rng, left=(yaw == 0.0), placed=poses, yaw=yaw))
     return np.array(poses)
