@@ -24,7 +24,8 @@ Conventions (every face):
   Its mask covers the target only, so it is called ``"target_mask"``: a mask named
   ``"action_mask"`` would make the standard tools call ``Box.sample(mask=...)``, which fails.
 * An episode that ends with a team wiped out is *terminated*; one that ends at the time
-  limit with both teams standing is *truncated*.
+  limit with both teams standing is *truncated* (SMAC's convention, ``episode_limit``),
+  although the referee decides the game there (docs/ecosystem.md, "Episodes").
 """
 
 from __future__ import annotations
