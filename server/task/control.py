@@ -1,6 +1,9 @@
 """The controller: body-velocity commands for every robot from its intent, 10 times a second.
 
-Each robot's command is recomputed every ``CONTROL_EVERY`` physics steps and held in between:
+Each robot's command is recomputed at the first physics step of every decision and every
+``CONTROL_EVERY`` steps after it within the decision, and held in between (so with
+``decision_steps`` not a multiple of 5 the last update of a decision is held for fewer
+steps; a new decision's intent takes effect at once):
 a continuous action is its own command; a discrete move or a goal (abstract actions and bots,
 followed along the planner's path) gives the translation, and the chassis auto-turns toward
 the robot's target. The arena packs one decision's intents into :class:`Orders` once, and
