@@ -20,8 +20,10 @@ Scalars (:data:`SCALAR_KEYS`; SMAC's keys where SMAC has one):
 
 Per robot (:data:`ROBOT_KEYS`), arrays with one entry per robot, blue robots first:
 
-* ``alive`` (bool), ``hp_fraction`` and ``bullets_fraction`` (float32, what is left of the
-  robot's starting HP and bullets, in [0, 1], read from the global state),
+* ``alive`` (bool), ``hp_fraction`` and ``bullets_fraction`` (float32, in [0, 1], read
+  from the global state: HP over the robot's starting HP; bullets over the most it can
+  hold in the episode, its starting 370, or with the ``zones`` option also the ammunition
+  bonuses the episode can bring, so 370 / 470 at the start of a 20 s episode),
   ``damage_dealt`` and ``damage_taken`` (float64, HP so far this episode), ``kills``
   (int64).
 
