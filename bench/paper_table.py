@@ -233,18 +233,17 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
         # Trained and tested, but the table stopped before recording it: record it as is.
         print(f"recording {run_dir}, finished before it was recorded", flush=True)
         result = finished_result(run_dir, saved)
-    elif run_dir.exists() and (cfg.max_minutes > 0 or saved is None):
-        # A time budget is per session: a resumed run would train past it; a run stopped
-        # before its first checkpoint cannot be continued. Either starts afresh.
-        print(f"{run_dir} cannot be resumed: moved to {set_aside(run_dir)}", flush=True)
-        print(f"starting {run_dir}", flush=True)
-        result = train(cfg)
-    elif saved is not None:
-        print(f"resuming {run_dir} at {saved['counters']['episodes']} episodes", flush=True)
-        result = train(cfg, resume=True)
     else:
-        print(f"starting {run_dir}", flush=True)
-        result = train(cfg)
+        if run_dir.exists() and (cfg.max_minutes > 0 or saved is None):
+            # A time budget is per session: a resumed run would train past it; a run stopped
+            # before its first checkpoint cannot be continued. Either starts afresh.
+            print(f"{run_dir} cannot be resumed: moved to {set_aside(run_dir)}", flush=True)
+            saved = None
+        if saved is not None:
+            print(f"resuming {run_dir} at {saved['counters']['episodes']} episodes", flush=True)
+        else:
+            print(f"starting {run_dir}", flush=True)
+        result = train(cfg, resume=saved is not None)
     line = record(args, alg, level, seed, result)
     # Relative to the table's own folder, so the record stays true wherever the table and
     # its ``_runs`` folder are copied together (a run on another machine, into docs/data).

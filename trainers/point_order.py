@@ -86,13 +86,13 @@ class PointOrder:
             return obs, avail, actions
         k = order.shape[-1]
         base = (torch.arange(order.shape[-2]) * k).unsqueeze(-1)  # [E, 1]: enemy j's first
+        slots = torch.arange(k).expand_as(order)
+        listed = slots < distinct  # [..., E, k]: new slots that are not repeats
         # A listed slot's availability moves with its point; a repeat keeps its own (the
         # same as a listed one's, but for a destroyed robot's lone no-op, action 0).
-        listed = torch.arange(k) < distinct  # [..., E, k]: new slots that are not repeats
-        avail = avail.gather(-1, (base + torch.where(listed, order, torch.arange(k))).flatten(-2))
+        avail = avail.gather(-1, (base + torch.where(listed, order, slots)).flatten(-2))
         # Old slot c goes where its point now stands; a repeat (c ≥ distinct) is a copy of
         # the last distinct point, and goes where that point stands.
-        slots = torch.arange(k).expand_as(order)
         where = torch.zeros(*order.shape[:-1], k + 1, dtype=torch.int64)  # slot k: repeats
         where.scatter_(-1, torch.where(listed, order, k), slots)
         new_slot = where.gather(-1, torch.minimum(slots, distinct - 1))  # [..., E, k_old]

@@ -95,13 +95,11 @@ def test_each_taken_action_still_names_its_point(batch: tuple[Batch, EnvInfo]) -
     torch.testing.assert_close(turned.last_actions[:, 1:], turned.actions)
 
 
-def test_abstract_actions_without_observed_points_cannot_be_turned() -> None:
-    info = EnvInfo.from_dict(
-        {"n_actions": 8, "n_agents": 2, "state_shape": 21, "obs_shape": 21, "episode_limit": 50,
-         "action_space": "abstract", "agents": ["blue_0", "blue_1"], "n_enemies": 2,
-         "decision_steps": 20, "mode": "cooperative", "team_size": 2, "k": 4,
-         "candidate_obs": False, "vector_obs": True, "lidar_beams": 0}
-    )  # fmt: skip
+def test_abstract_actions_without_observed_points_cannot_be_turned(
+    batch: tuple[Batch, EnvInfo],
+) -> None:
+    played = batch[1]  # the same task without the 2 · k · 2 point columns
+    info = replace(played, candidate_obs=False, obs_shape=played.obs_shape - 2 * K * 2)
     with pytest.raises(UnknownSymmetryError, match="the candidate points in the observation"):
         task_group(("field",), "raw", info)
     assert len(task_group(("enemies", "allies"), "raw", info)) == 4
