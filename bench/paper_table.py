@@ -1,57 +1,58 @@
 """The paper's table, measured: IQL, VDN, QMIX × easy, middle, hard × seeds, resumable.
 
-    python -m bench.paper_table [--learner paper|defaults] [--seeds 1 2 3]
+    python -m bench.paper_table [--learner paper|defaults|defaults_released]
+                                [--algs ...] [--levels easy middle hard 0 1] [--seeds 1 2 3]
                                 [--runs runs/table] [--out docs/data/paper_table.json]
                                 [--report | --test-at KEY=VALUE;...]
 
-``--learner paper`` (the default) trains every cell with ``--preset paper``: the paper's
-learner, hyper-parameters, loop and contexts at its budget of 30,000 episodes, then tests
-the final weights on 200 held-out episodes at coef 1.0 (the reported figure) and at 1.5.
-``--learner defaults`` trains with this project's own learner under a 30-minute budget
-(VDN by default: ``--algs vdn``), tested on the same starts at coef 1.0 and 1.5, at its own
-friction (μ 0.1, the default contexts; the paper preset's runs are tested at its μ 0.5).
+``--learner paper`` (the default) trains every cell with ``--preset paper``, the authors'
+released training code (trainers/config.py ``PRESETS``): 30,000 episodes, then the final
+weights tested on 200 held-out episodes at coef 1.5 with the released win rule, the
+referee's win/draw/loss beside it, and at coef 1.0 as a second column. ``--learner
+defaults`` trains with this project's own learner under a 30-minute budget (VDN by
+default: ``--algs vdn``) at its default contexts, tested at coef 1.0 and 1.5;
+``--learner defaults_released`` is the like-for-like row: the same learner trained at the
+released contexts (μ 0.5, coef 0.5) and tested as released (coef 1.5, the released win
+rule; coef 1.0 beside it). Levels are the paper's bots and the released build's levels
+``0`` and ``1``.
 
 Cells run one at a time, seed-major (every cell's first seed before any second seed), so a
 partial table covers every cell early. Each run has its own directory under ``--runs``; a
 run stopped half-way is resumed from its checkpoint (a time-budgeted run is started afresh,
 its old folder renamed ``<run>.stale-<time>``: its budget is per session), Ctrl-C stops the
-run in progress with a checkpoint, and a run already in ``--out`` is skipped, so the same command
-continues the table after any interruption. After each run one record is written to
-``--out`` (atomically): alg, level, learner, seed, episodes, env steps, updates, wall
-minutes, the test win rate (and draws, losses, return) at each evaluation contexts, the run
-directory, the commit and the machine; the run's logs (config, train.csv, eval.csv) are
-copied to ``<out>_runs/`` (the record's ``logs``, relative to the folder of ``--out``) so
-that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*`` draws the learning curves
-whatever machine ran them. ``--env`` picks in-process arenas (the
-default here: the same episodes as served arenas, without a server process competing for
-the 2 cores) or served ones. ``--set KEY=VALUE`` overrides any config key but those that
-name the cell (``alg``, ``level``, ``seed``, ``out``; tests use it for tiny runs). Prints
-the table so far at the end (``--report``: only that, as Markdown for docs/results.md:
-mean ± 95 % Student-t interval over seeds, each seed's figure, and the compute the
-recorded runs took). ``--test-at "coef=0.5"`` tests the recorded runs'
-final weights again with their test contexts so updated, on the same starts (their
-checkpoints must still be in ``--runs``), stores the results in the records and stops; the
-report then adds a table of them.
+run in progress with a checkpoint, and a run already in ``--out`` is skipped, so the same
+command continues the table after any interruption. After each run one record is written
+to ``--out`` (atomically): alg, level, learner, seed, episodes, env steps, gradient updates,
+transitions sampled into them, iterations, wall minutes, the training contexts, each
+test's contexts and figures (both win rules, draws, losses, return), the headline win
+rule, the run directory, the commit and the machine; the run's logs (config, train.csv,
+eval.csv) are copied to ``<out>_runs/`` (the record's ``logs``, relative to the folder of
+``--out``) so that ``neuronsmae-plot docs/data/paper_table_runs/paper/*_easy_*`` draws the
+learning curves whatever machine ran them. ``--env`` picks in-process arenas (the default
+here: the same episodes as served arenas, without a server process competing for the 2
+cores) or served ones. ``--set KEY=VALUE`` overrides any config key but those that name
+the cell (``alg``, ``level``, ``seed``, ``out``; tests use it for tiny runs). Prints the
+table so far at the end (``--report``: only that, as Markdown: bench/paper_report.py).
+``--test-at "coef=0.5"`` tests the recorded runs' final weights again with their test
+contexts so updated, on the same starts (their checkpoints must still be in ``--runs``),
+stores the results in the records and stops; the report then adds a table of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import shutil
-import statistics
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from scipy import stats
-
 from bench.common import Distinct, at_least, commit, non_negative
+from bench.paper_report import ALGS, LEARNERS, LEVELS, RELEASED, TEST_FIELDS, report
 from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
 from neuronsmae.trainers.config import (
@@ -64,17 +65,21 @@ from neuronsmae.trainers.config import (
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import evaluate_checkpoint
 from neuronsmae.trainers.interrupt import TrainingInterrupted
-from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
 from neuronsmae.trainers.records import read_records
 from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
 
-ALGS = ("iql", "vdn", "qmix")
-LEVELS = ("easy", "middle", "hard")
-TEST_FIELDS = ("win_rate", "draw_rate", "loss_rate", "mean_return")
-"""What a record keeps of each test, beside its episode count."""
-
-DEFAULTS_TESTS = {"eval.extra_test_contexts": "coef=1.5"}
-"""The project's learner is tested at coef 1.5 too, beside the paper preset's runs."""
+LEARNER_LAYERS: dict[str, dict[str, Any]] = {
+    "defaults": {"eval.extra_test_contexts": "coef=1.5"},
+    "defaults_released": {
+        "contexts": "Friction_coeff=0.5;coef=0.5",
+        "eval.eval_contexts": "Friction_coeff=0.5;coef=1.5",
+        "eval.extra_test_contexts": "coef=1.0",
+        "eval.win_rule": "released",
+    },
+}
+"""The project's learner's layers over its defaults, by ``--learner`` (the paper preset is
+a layer of its own): tested at coef 1.5 beside its own coef 1.0, or trained and tested at
+the released contexts with the released win rule (the like-for-like row)."""
 
 
 def cell_config(
@@ -85,7 +90,7 @@ def cell_config(
     if args.learner == "paper":
         layers.append(preset("paper"))
     else:
-        layers.append({"max_minutes": args.minutes, **DEFAULTS_TESTS})
+        layers.append({"max_minutes": args.minutes, **LEARNER_LAYERS[args.learner]})
     layers.append(
         {
             "alg": alg,
@@ -95,6 +100,7 @@ def cell_config(
             "env": args.env,
             "out": str(run_dir),
             "progress": sys.stderr.isatty(),
+            "torch_threads": args.torch_threads,
         }
     )
     overrides = parse_overrides(args.set)
@@ -142,11 +148,13 @@ def _figures(row: dict[str, Any]) -> dict[str, Any]:
 
 
 def record(
-    args: argparse.Namespace, alg: str, level: str, seed: int, result: dict[str, Any]
-) -> dict[str, Any]:
+    args: argparse.Namespace, alg: str, level: str, seed: int, result: dict[str, Any],
+    cfg: TrainConfig,
+) -> dict[str, Any]:  # fmt: skip
     """One run's line of the table."""
     counters = result["counters"]
     tests = {"main": result["final"], **result.get("extra_tests", {})}
+    level_bot = {"level": int(level) if level in RELEASED else level}
     return {
         "alg": alg,
         "level": level,
@@ -156,7 +164,14 @@ def record(
         "episodes": counters["episodes"],
         "env_steps": counters["env_steps"],
         "updates": counters["updates"],
+        "samples": counters.get("samples", 0),
+        "iterations": counters.get("rounds", 0),
         "wall_minutes": round(counters["wall_seconds"] / 60, 2),
+        "contexts": cfg.contexts,
+        "win_rule": cfg.eval.win_rule,
+        "test_contexts": {
+            name: level_bot | spec.value() for name, spec in cfg.eval.context_specs().items()
+        },
         "test": {name: _figures(row) for name, row in tests.items()},
         "run_dir": result["run_dir"],
         "commit": commit(),
@@ -244,7 +259,7 @@ def run_cell(args: argparse.Namespace, alg: str, level: str, seed: int) -> dict[
         else:
             print(f"starting {run_dir}", flush=True)
         result = train(cfg, resume=saved is not None)
-    line = record(args, alg, level, seed, result)
+    line = record(args, alg, level, seed, result, cfg)
     # Relative to the table's own folder, so the record stays true wherever the table and
     # its ``_runs`` folder are copied together (a run on another machine, into docs/data).
     line["logs"] = (
@@ -296,100 +311,23 @@ def test_at(args: argparse.Namespace, extra: str) -> int:
     return added
 
 
-def interval(rates: Sequence[float]) -> tuple[float, float | None]:
-    """The mean of ``rates`` and the half-width of its 95 % Student-t interval over the
-    seeds (None for fewer than two)."""
-    mean = statistics.fmean(rates)
-    if len(rates) < 2:
-        return mean, None
-    sem = statistics.stdev(rates) / math.sqrt(len(rates))
-    return mean, float(stats.t.ppf(0.975, len(rates) - 1)) * sem
-
-
-def cell(runs: Sequence[dict[str, Any]], test: str, seeds: int) -> str:
-    """One table cell: mean ± 95 % interval over seeds, then each seed's win rate; ``—`` with
-    no run, and the count of seeds when some are missing."""
-    runs = [r for r in runs if test in r["test"]]
-    if not runs:
-        return "—"
-    rates = [r["test"][test]["win_rate"] for r in runs]
-    mean, half = interval(rates)
-    head = f"{mean:.3f}" if half is None else f"{mean:.3f} ± {half:.3f}"
-    each = ", ".join(f"s{r['seed']} {r['test'][test]['win_rate']:.3f}" for r in runs)
-    missing = f"; {len(runs)} of {seeds} seeds" if len(runs) < seeds else ""
-    return f"{head} ({each}{missing})"
-
-
-def _runs(records: list[dict[str, Any]], alg: str, level: str, learner: str) -> list[dict]:
-    """The records of one cell and learner, by seed."""
-    mine = [r for r in records if (r["alg"], r["level"], r["learner"]) == (alg, level, learner)]
-    return sorted(mine, key=lambda r: r["seed"])
-
-
-def report(table: dict[str, Any], seeds: int = 3) -> str:
-    """The table as Markdown: the paper's figure, the paper preset's test win rate at coef
-    1.0 (the paper's reported setting) and at 1.5, and the project's learner at coef 1.0;
-    then what is recorded and the compute it took."""
-    records = table["records"]
-    lines = [
-        "| level | alg | paper | `--preset paper` (μ 0.5), coef 1.0 | `--preset paper` (μ 0.5), "
-        "coef 1.5 | project's learner (μ 0.1), coef 1.0 |",
-        "|---|---|---|---|---|---|",
-    ]
-    for level in LEVELS:
-        for alg in ALGS:
-            paper, ours = (_runs(records, alg, level, who) for who in ("paper", "defaults"))
-            lines.append(
-                f"| {level} | {alg.upper()} | {PAPER[level][alg]:.2f} | "
-                f"{cell(paper, 'main', seeds)} | {cell(paper, 'coef=1.5', seeds)} | "
-                f"{cell(ours, 'main', seeds)} |"
-            )
-    done = [r for r in records if r["learner"] == "paper"]
-    hours = sum(r["wall_minutes"] for r in done) / 60
-    lines.append("")
-    lines.append(
-        f"Paper preset: {len(done)} of {len(ALGS) * len(LEVELS) * seeds} runs recorded, "
-        f"{sum(r['episodes'] for r in done):,} training episodes "
-        f"({sum(r['env_steps'] for r in done) / 1e6:.1f} million decisions), {hours:.1f} h "
-        "of wall time (training and tests)."
-    )
-    ours = [r for r in records if r["learner"] == "defaults"]
-    if ours:
-        algs = [a for a in ALGS if any(r["alg"] == a for r in ours)]
-        lines.append(
-            f"Project's learner: {len(ours)} of {len(algs) * len(LEVELS) * seeds} runs "
-            f"recorded ({', '.join(a.upper() for a in algs)}), "
-            f"{sum(r['episodes'] for r in ours):,} training episodes, "
-            f"{sum(r['wall_minutes'] for r in ours) / 60:.1f} h of wall time."
-        )
-    return "\n".join(lines + _retests(done))
-
-
-def _retests(done: list[dict[str, Any]]) -> list[str]:
-    """A second table for the tests added by ``--test-at`` (none: no lines)."""
-    extra = sorted({k for r in done for k in r["test"]} - {"main", "coef=1.5"})
-    if not extra:
-        return []
-    head = " | ".join(f"`--preset paper` (μ 0.5), {k}" for k in extra)
-    lines = ["", f"| level | alg | `--preset paper` (μ 0.5), coef 1.0 | {head} |"]
-    lines.append("|---|---|---|" + "---|" * len(extra))
-    for level in LEVELS:
-        for alg in ALGS:
-            runs = _runs(done, alg, level, "paper")
-            n = max(len(runs), 1)
-            cells = " | ".join([cell(runs, k, n) for k in ("main", *extra)])
-            lines.append(f"| {level} | {alg.upper()} | {cells} |")
-    return lines
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--learner", choices=("paper", "defaults"), default="paper")
+    p.add_argument("--learner", choices=LEARNERS, default="paper")
     p.add_argument("--algs", nargs="+", action=Distinct, choices=ALGS, default=None)
-    p.add_argument("--levels", nargs="+", action=Distinct, choices=LEVELS, default=list(LEVELS))
+    p.add_argument(
+        "--levels", nargs="+", action=Distinct, choices=(*LEVELS, *RELEASED), default=list(LEVELS)
+    )
     p.add_argument("--seeds", nargs="+", action=Distinct, type=at_least(0), default=[1, 2, 3])
     p.add_argument("--workers", type=at_least(0), default=2, help="rollout workers (0: auto)")
     p.add_argument("--env", choices=("inprocess", "remote"), default="inprocess")
+    p.add_argument(
+        "--torch-threads",
+        type=at_least(1),
+        default=min(2, os.cpu_count() or 1),
+        help="the learner's threads (default: 2, or 1 on one core; the synchronous loop "
+        "learns while the workers wait)",
+    )
     p.add_argument(
         "--minutes", type=non_negative, default=30.0, help="defaults: budget per run (0: none)"
     )
@@ -426,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     for seed in args.seeds:
         for level in args.levels:
             for alg in algs:
+                if level in RELEASED and alg != "vdn":
+                    continue  # the released levels are VDN's rows (run_dr.sh)
                 key = (alg, level, seed, args.learner)
                 done = {(r["alg"], r["level"], r["seed"], r["learner"]) for r in table["records"]}
                 if key in done:

@@ -2,7 +2,9 @@
 
 One network serves every agent (parameter sharing, as in PyMARL): a one-hot agent id in the
 input lets the agents still behave differently, and the one-hot last action gives the GRU
-what it needs to tell its own past choices from the environment's response.
+what it needs to tell its own past choices from the environment's response. Two networks
+share one interface (:data:`AGENT_NETWORKS`): the GRU (this project's default) and the
+released code's MLP, which sees the current input alone.
 
 The GRU is an ``nn.GRU`` rather than a ``GRUCell`` loop: the inputs of a stored episode are
 all known in advance (the last actions come from the buffer), so the learner runs the whole
@@ -80,53 +82,41 @@ def build_inputs(
     return torch.cat(parts, dim=-1)
 
 
-class RNNAgent(nn.Module):
-    """``Linear → ReLU → GRU → Linear``: one Q-value per action for every agent.
+class _QNetwork(nn.Module):
+    """What the agent networks share: a linear Q output per action on the last hidden layer,
+    and the optional points head.
 
-    Shapes: ``inputs [B, T, D]`` and ``hidden [1, B, H]`` → ``q [B, T, n_actions]`` and the
-    new ``hidden [1, B, H]``. B counts (episode, agent) pairs, so agents are folded into the
-    batch; H is ``hidden_dim``.
+    Both networks take ``inputs [B, T, D]`` and a recurrent state ``hidden [1, B, H]`` and
+    return ``q [B, T, n_actions]`` and the next state, so acting and learning call either the
+    same way. B counts (episode, agent) pairs, so agents are folded into the batch.
     """
 
-    def __init__(
-        self,
-        input_dim: int,
-        n_actions: int,
-        hidden_dim: int = 128,
-        action_index: torch.Tensor | None = None,
-        head_hidden: int = 64,
-    ) -> None:
+    def __init__(self, input_dim: int, hidden_dim: int) -> None:
         super().__init__()
         self.hidden_dim = hidden_dim
         self.fc1 = nn.Linear(input_dim, hidden_dim)
-        self.rnn = nn.GRU(hidden_dim, hidden_dim, batch_first=True)
-        self.fc2 = nn.Linear(hidden_dim, n_actions)
         self.point_head: nn.Module | None = None
+
+    def _add_point_head(self, action_index: torch.Tensor | None, head_hidden: int) -> None:
+        """The points head, built last (after the layers a subclass adds, which keeps the
+        order in which a seeded run draws the initial weights)."""
         if action_index is not None:
             # ``action_index [A, F]``: which input columns describe action a's target and
-            # point. One small MLP scores every action from (GRU output, those columns), so
-            # what it learns about one candidate point transfers to all eight.
+            # point. One small MLP scores every action from (last hidden layer, those
+            # columns), so what it learns about one candidate point transfers to all eight.
             self.register_buffer("action_index", action_index.long(), persistent=False)
             self.point_head = nn.Sequential(
-                nn.Linear(hidden_dim + action_index.shape[1], head_hidden),
+                nn.Linear(self.hidden_dim + action_index.shape[1], head_hidden),
                 nn.ReLU(),
                 nn.Linear(head_hidden, 1),
             )
 
-    def initial_hidden(self, batch: int) -> torch.Tensor:
-        """A zero hidden state ``[1, batch, H]`` for the start of an episode."""
-        return torch.zeros(1, batch, self.hidden_dim, device=self.fc1.weight.device)
-
-    def forward(
-        self, inputs: torch.Tensor, hidden: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Run ``T`` steps; return the Q-values ``[B, T, A]`` and the last hidden state."""
-        x = F.relu(self.fc1(inputs))
-        out, hidden = self.rnn(x, hidden)
+    def _q(self, out: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """Q-values ``[B, T, A]`` from the last hidden layer ``out [B, T, H]``."""
         q = self.fc2(out)
         if self.point_head is not None:
             q = q + self._score_points(out, inputs[..., self.action_index])
-        return q, hidden
+        return q
 
     def _score_points(self, out: torch.Tensor, per_action: torch.Tensor) -> torch.Tensor:
         """The point head on ``[out, per_action]`` for every action: ``[B, T, A]``.
@@ -141,6 +131,77 @@ class RNNAgent(nn.Module):
         w_out, w_act = first.weight.split([self.hidden_dim, per_action.shape[-1]], dim=1)
         pre = F.linear(out, w_out, first.bias).unsqueeze(-2) + F.linear(per_action, w_act)
         return last(act(pre)).squeeze(-1)
+
+
+class RNNAgent(_QNetwork):
+    """``Linear → ReLU → GRU → Linear``: one Q-value per action for every agent (PyMARL's
+    agent; this project's default, ``learner.agent_net="gru"``).
+
+    Shapes: ``inputs [B, T, D]`` and ``hidden [1, B, H]`` → ``q [B, T, n_actions]`` and the
+    new ``hidden [1, B, H]``; H is ``hidden_dim``.
+    """
+
+    def __init__(
+        self,
+        input_dim: int,
+        n_actions: int,
+        hidden_dim: int = 128,
+        action_index: torch.Tensor | None = None,
+        head_hidden: int = 64,
+    ) -> None:
+        super().__init__(input_dim, hidden_dim)
+        self.rnn = nn.GRU(hidden_dim, hidden_dim, batch_first=True)
+        self.fc2 = nn.Linear(hidden_dim, n_actions)
+        self._add_point_head(action_index, head_hidden)
+
+    def initial_hidden(self, batch: int) -> torch.Tensor:
+        """A zero hidden state ``[1, batch, H]`` for the start of an episode."""
+        return torch.zeros(1, batch, self.hidden_dim, device=self.fc1.weight.device)
+
+    def forward(
+        self, inputs: torch.Tensor, hidden: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Run ``T`` steps; return the Q-values ``[B, T, A]`` and the last hidden state."""
+        out, hidden = self.rnn(F.relu(self.fc1(inputs)), hidden)
+        return self._q(out, inputs), hidden
+
+
+class MLPAgent(_QNetwork):
+    """``Linear → ReLU → Linear → ReLU → Linear``: Q-values from the current input alone
+    (the released code's agent, network/qmix_net.py's ``myRNN``, which has no recurrence;
+    ``learner.agent_net="mlp"``).
+
+    It keeps the recurrent interface, so every caller runs it as it runs :class:`RNNAgent`:
+    the state it takes and returns is a constant zero ``[1, B, 1]`` that carries nothing.
+    """
+
+    def __init__(
+        self,
+        input_dim: int,
+        n_actions: int,
+        hidden_dim: int = 128,
+        action_index: torch.Tensor | None = None,
+        head_hidden: int = 64,
+    ) -> None:
+        super().__init__(input_dim, hidden_dim)
+        self.fc_mid = nn.Linear(hidden_dim, hidden_dim)
+        self.fc2 = nn.Linear(hidden_dim, n_actions)
+        self._add_point_head(action_index, head_hidden)
+
+    def initial_hidden(self, batch: int) -> torch.Tensor:
+        """The constant state ``[1, batch, 1]`` (zeros; the network has no memory)."""
+        return torch.zeros(1, batch, 1, device=self.fc1.weight.device)
+
+    def forward(
+        self, inputs: torch.Tensor, hidden: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Q-values ``[B, T, A]`` of every step on its own; ``hidden`` comes back as given."""
+        out = F.relu(self.fc_mid(F.relu(self.fc1(inputs))))
+        return self._q(out, inputs), hidden
+
+
+AGENT_NETWORKS: dict[str, type[_QNetwork]] = {"gru": RNNAgent, "mlp": MLPAgent}
+"""The agent networks by ``learner.agent_net`` name."""
 
 
 def _given(value: Any) -> str:

@@ -174,16 +174,7 @@ class EpisodeReplayBuffer:
         per_episode = sum(
             int(np.prod(shape)) * np.dtype(d).itemsize for shape, d in arrays.values()
         )
-        available = available_memory()
-        if available is not None and capacity * per_episode > available:
-            # NumPy's zeros are allocated lazily: without this the run would be killed only
-            # once the buffer filled, hours in.
-            raise ReplayMemoryError(
-                f"{capacity} episodes of replay need {capacity * per_episode / 2**30:.1f} GiB "
-                f"({per_episode / 2**10:.0f} KiB each for this task) and this machine has "
-                f"{available / 2**30:.1f} GiB available; at most "
-                f"{available // per_episode} episodes fit"
-            )
+        _check_memory(capacity, "episode", per_episode)
         z = {k: np.zeros((capacity, *shape), dtype) for k, (shape, dtype) in arrays.items()}
         self.obs, self.state, self.avail, self.alive = z["obs"], z["state"], z["avail"], z["alive"]
         self.actions, self.rewards = z["actions"], z["rewards"]
@@ -242,3 +233,117 @@ class EpisodeReplayBuffer:
             terminated=torch.from_numpy(self.terminated[idx, :steps]),
             filled=torch.from_numpy(self.filled[idx, :steps]),
         )
+
+
+def transition_arrays(
+    n_agents: int, obs_dim: int, state_dim: int, n_actions: int
+) -> dict[str, tuple[tuple[int, ...], type[np.generic]]]:
+    """Each array a :class:`TransitionReplayBuffer` stores per transition: its shape and
+    dtype. Index 0 of the leading 2 is the decision's step, 1 the step after it."""
+    n = n_agents
+    return {
+        "obs": ((2, n, obs_dim), np.float32),
+        "state": ((2, state_dim), np.float32),
+        "avail": ((2, n, n_actions), np.bool_),
+        "alive": ((2, n), np.float32),
+        "actions": ((n,), np.int64),
+        "last_actions": ((n,), np.int64),
+        "rewards": ((), np.float32),
+        "terminated": ((), np.float32),
+    }
+
+
+def _check_memory(capacity: int, unit: str, per_item: int) -> None:
+    """Refuse a buffer larger than the memory available (:class:`ReplayMemoryError`):
+    NumPy's zeros are allocated lazily, so without this the run would be killed only once
+    the buffer filled, hours in."""
+    available = available_memory()
+    if available is not None and capacity * per_item > available:
+        raise ReplayMemoryError(
+            f"{capacity} {unit}s of replay need {capacity * per_item / 2**30:.1f} GiB "
+            f"({per_item / 2**10:.1f} KiB each for this task) and this machine has "
+            f"{available / 2**30:.1f} GiB available; at most {available // per_item} "
+            f"{unit}s fit"
+        )
+
+
+class TransitionReplayBuffer:
+    """A ring buffer of the last ``capacity`` single transitions (the released code's
+    replay, common/replay_buffer.py: 200,000 transitions; ``learner.replay="transitions"``).
+
+    It takes whole :class:`Episode` s like :class:`EpisodeReplayBuffer` and keeps each
+    decision as ``(o_t, s_t, masks_t, u_t, r_t, o_{t+1}, s_{t+1}, masks_{t+1}, done_t)``;
+    ``len()`` counts transitions. :meth:`sample` draws uniformly with replacement and
+    returns a :class:`Batch` of one-step sequences (``T = 1``), so the one Q-learner trains
+    on it unchanged. Only a network without memory (``agent_net="mlp"``) can learn from it.
+    """
+
+    def __init__(
+        self, capacity: int, n_agents: int, obs_dim: int, state_dim: int, n_actions: int,
+        episode_limit: int,
+    ) -> None:  # fmt: skip
+        if capacity < 1:
+            raise ValueError(f"buffer capacity must be ≥ 1, got {capacity}")
+        self.capacity = capacity
+        self.dims = (n_agents, obs_dim, state_dim, n_actions, episode_limit)
+        arrays = transition_arrays(n_agents, obs_dim, state_dim, n_actions)
+        per = sum(int(np.prod(shape)) * np.dtype(d).itemsize for shape, d in arrays.values())
+        _check_memory(capacity, "transition", per)
+        self.data = {k: np.zeros((capacity, *shape), d) for k, (shape, d) in arrays.items()}
+        self.next_slot = 0
+        self.size = 0
+        self.added = 0
+        """Transitions stored since the buffer was made (the overwritten ones included)."""
+
+    def __len__(self) -> int:
+        return self.size
+
+    def add(self, episode: Episode) -> None:
+        """Validate an episode and store each of its decisions, overwriting the oldest
+        transitions when full."""
+        episode.validate(*self.dims)
+        steps = episode.length
+        slots = (self.next_slot + np.arange(steps)) % self.capacity
+        last = np.concatenate([np.full((1, self.dims[0]), -1), episode.actions[:-1]])
+        done = np.zeros(steps, np.float32)
+        done[-1] = 1.0
+        rows = {
+            "obs": np.stack([episode.obs[:-1], episode.obs[1:]], axis=1),
+            "state": np.stack([episode.state[:-1], episode.state[1:]], axis=1),
+            "avail": np.stack([episode.avail[:-1], episode.avail[1:]], axis=1) > 0,
+            "alive": np.stack([episode.alive[:-1], episode.alive[1:]], axis=1),
+            "actions": episode.actions,
+            "last_actions": last,
+            "rewards": episode.rewards,
+            "terminated": done,
+        }
+        for name, values in rows.items():
+            self.data[name][slots] = values
+        self.next_slot = int((self.next_slot + steps) % self.capacity)
+        self.size = min(self.size + steps, self.capacity)
+        self.added += steps
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
+        """Draw ``min(batch_size, len(self))`` transitions uniformly with replacement (the
+        released code's ``np.random.randint`` over what is stored)."""
+        if self.size == 0:
+            raise ValueError("cannot sample from an empty buffer")
+        idx = rng.integers(0, self.size, size=min(batch_size, self.size))
+        d = {k: torch.from_numpy(v[idx]) for k, v in self.data.items()}
+        actions = d["actions"].unsqueeze(1)  # [B, 1, n]
+        return Batch(
+            obs=d["obs"],
+            state=d["state"],
+            avail=d["avail"],
+            alive=d["alive"],
+            actions=actions,
+            last_actions=torch.cat([d["last_actions"].unsqueeze(1), actions], dim=1),
+            rewards=d["rewards"].unsqueeze(1),
+            terminated=d["terminated"].unsqueeze(1),
+            filled=torch.ones_like(d["rewards"]).unsqueeze(1),
+        )
+
+
+REPLAYS: dict[str, type] = {"episodes": EpisodeReplayBuffer, "transitions": TransitionReplayBuffer}
+"""The replay buffers by ``learner.replay`` name; both take the same arguments (capacity in
+episodes or in transitions)."""

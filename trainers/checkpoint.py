@@ -21,7 +21,7 @@ import torch
 
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import NeuronsMAEError
-from neuronsmae.trainers.agent import one_hot_width
+from neuronsmae.trainers.agent import AGENT_NETWORKS, one_hot_width
 from neuronsmae.trainers.features import FEATURES, HEADS, feature_dim
 from neuronsmae.trainers.learner import AgentSpec, EnvSpec
 
@@ -56,6 +56,11 @@ class Counters:
     """Decisions taken in those episodes."""
     updates: int = 0
     """Gradient updates."""
+    samples: int = 0
+    """Decision steps drawn into those updates (a transition replay's batch of 2,000 is
+    2,000; an episode batch counts its episodes' steps)."""
+    rounds: int = 0
+    """Training rounds (iterations in synchronous mode) that learned."""
     wall_seconds: float = 0.0
     """Training wall time over all sessions of the run."""
     restarts: int = 0
@@ -146,6 +151,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
 SPEC_FIELDS: dict[str, tuple[type, ...]] = {
     "input_dim": (int,), "n_actions": (int,), "hidden_dim": (int,), "last_action": (bool,),
     "agent_id": (bool,), "features": (str,), "head": (str,), "env_info": (dict, type(None)),
+    "network": (str,), "masked": (bool,),
 }  # fmt: skip
 """The saved ``agent_spec``'s keys (:class:`AgentSpec`'s fields) and their types."""
 
@@ -188,6 +194,10 @@ def _spec(saved: dict[str, Any], n_agents: Any, p: Path) -> AgentSpec:
         raise CheckpointError(
             f"{p}: agent_spec features={spec.features!r}, head={spec.head!r}; valid: "
             f"features in {list(FEATURES)}, head in {list(HEADS)}"
+        )
+    if spec.network not in AGENT_NETWORKS:
+        raise CheckpointError(
+            f"{p}: agent_spec network={spec.network!r}; valid: {list(AGENT_NETWORKS)}"
         )
     extra = one_hot_width(spec, n_agents)
     try:

@@ -39,6 +39,10 @@ MAX_WIDTH = 4096
 GRU of 100 million weights)."""
 
 
+WIN_RULES = {"referee": "win_rate", "released": "released_win_rate"}
+"""``eval.win_rule`` → the evaluation figure it names."""
+
+
 class ConfigError(ValueError):
     """An unknown key, a value of the wrong type, or a value out of range."""
 
@@ -203,20 +207,83 @@ class LearnerConfig:
     agent_id_input: bool = True
     """Give the agent network its one-hot agent index."""
     buffer_size: int = 5000
-    """Replay capacity in episodes, ≥ 1. A run refuses a buffer larger than the memory its
-    machine has available, naming the size of one episode for its task (tens of KiB on the
-    default 2 v 2)."""
+    """Replay capacity, ≥ 1, in episodes (in transitions with ``replay='transitions'``;
+    the released code's is 200,000). A run refuses a buffer larger than the memory its
+    machine has available, naming the size of one item for its task."""
     batch_size: int = 32
-    """Episodes per gradient update, in [1, buffer_size]."""
+    """Episodes per gradient update (transitions with ``replay='transitions'``; the
+    released code's 2,000, or all that are stored while fewer), in [1, buffer_size]."""
     learning_starts: int = 64
-    """Episodes in the buffer before learning begins, in [0, buffer_size]."""
+    """Episodes (or transitions) in the buffer before learning begins, in [0,
+    buffer_size]."""
     train_every: int = 1
     """Asynchronous mode: episodes collected between training rounds, ≥ 1."""
     updates_per_round: int = 2
-    """Gradient updates per training round (per iteration in synchronous mode), ≥ 1."""
+    """Gradient updates per training round (per iteration in synchronous mode), ≥ 1; with
+    ``updates_per_stored_batch`` the least a round makes."""
+    updates_per_stored_batch: int = 0
+    """≥ 0. A round makes ``max(updates_per_round, updates_per_stored_batch ×
+    ⌊stored / batch_size⌋)`` updates, so the work per round grows as the replay fills
+    (0: ``updates_per_round`` always). The released code's is 2 with 20 per round:
+    ``max(20, 2·⌊stored transitions / 2,000⌋)``, 20 at first and 200 once 200,000 are
+    stored (runner.py)."""
+    agent_net: str = "gru"
+    """The shared agent network: gru (Linear, ReLU, GRU, Linear: PyMARL's recurrent agent,
+    trained on whole episodes) or mlp (observation → agent_hidden → agent_hidden → actions
+    with ReLU and no recurrence: the released code's, network/qmix_net.py's ``myRNN``)."""
+    replay: str = "episodes"
+    """What the replay stores and a batch holds: episodes (whole, padded; PyMARL's) or
+    transitions (single decisions drawn uniformly with replacement: the released code's,
+    common/replay_buffer.py; needs ``agent_net='mlp'``)."""
+    target_update_unit: str = "updates"
+    """What ``target_update_interval`` counts: updates, or rounds (the targets are copied
+    at the first update of every ``target_update_interval``-th round, counted from 0: the
+    released code copies them at the first update of every 5th iteration)."""
+    action_masks: str = "env"
+    """env: the agents act, and their targets maximise, within the environment's available
+    actions; ones: every action is open in acting and in targets (the released code's
+    all-ones masks, RmCooAbsEnv.py and common/rollout.py). The arena carries out any action
+    in range: a destroyed robot's is ignored, one naming a destroyed enemy aims at the
+    nearest live one, and a candidate slot the enemy has no point for holds the robot's own
+    position, so it stays (docs/options.md, "Actions")."""
+    mask_destroyed: bool = True
+    """A destroyed robot's Q is zeroed in the mixer's input and dropped from IQL's loss,
+    and IQL ends its return at its destruction; False: it is trained like a living one's
+    to the episode's end (the released code)."""
+    mixer_state: str = "state"
+    """What QMIX's hypernetworks read: state (the environment's global state) or
+    agent0_obs (agent 0's observation: the released ``get_state`` returns ``[obs[0]]``)."""
+    hypernet_layers: int = 2
+    """Layers of QMIX's weight hypernetworks, 1 or 2 (PyMARL's ``hypernet_layers``; the
+    released code's ``two_hyper_layers=False`` is 1). The bias hypernetworks are one layer
+    for b1 and two for b2 either way."""
+    eps_schedule: str = "episodes"
+    """How ε falls from eps_start to eps_end: episodes (linearly with the run's episode
+    count over ``eps_anneal_episodes``) or iterations (needs ``sync`` and
+    ``iteration_episodes``: ε steps once per iteration, all its episodes sharing it,
+    as each of the released code's 20 workers steps it before each of its own episodes:
+    iteration i, from 0, plays ``max(eps_end, eps_start − (i + 1)·Δ)`` with Δ = (eps_start −
+    eps_end) · iteration_episodes / eps_anneal_episodes; 600 per worker is 12,000 episodes
+    of the run)."""
 
     def __post_init__(self) -> None:
         check_types(self)
+        check_choice("agent_net", self.agent_net, ("gru", "mlp"))
+        check_choice("replay", self.replay, ("episodes", "transitions"))
+        check_choice("target_update_unit", self.target_update_unit, ("updates", "rounds"))
+        check_choice("action_masks", self.action_masks, ("env", "ones"))
+        check_choice("mixer_state", self.mixer_state, ("state", "agent0_obs"))
+        check_choice("hypernet_layers", self.hypernet_layers, (1, 2))
+        check_choice("eps_schedule", self.eps_schedule, ("episodes", "iterations"))
+        if self.replay == "transitions" and self.agent_net != "mlp":
+            raise ConfigError(
+                f"replay='transitions' needs agent_net='mlp' (a recurrent agent learns from "
+                f"whole episodes), got agent_net={self.agent_net!r}"
+            )
+        if self.updates_per_stored_batch < 0:
+            raise ConfigError(
+                f"updates_per_stored_batch must be ≥ 0, got {self.updates_per_stored_batch}"
+            )
         check_choice("features", self.features, (*FEATURES, "auto"))
         check_choice("head", self.head, (*HEADS, "auto"))
         if self.head == "points" and self.features not in (*POINT_FEATURES, "auto"):
@@ -255,6 +322,18 @@ class LearnerConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
 
+    def updates_in_round(self, stored: int) -> int:
+        """Gradient updates in a round with ``stored`` items in the replay: ``max(
+        updates_per_round, updates_per_stored_batch × ⌊stored / batch_size⌋)``."""
+        grown = self.updates_per_stored_batch * (stored // self.batch_size)
+        return max(self.updates_per_round, grown)
+
+    def refreshes_targets(self, round_index: int) -> bool:
+        """Whether round ``round_index`` (from 0) copies the targets after its first update
+        (``target_update_unit='rounds'``; by updates the learner counts them itself)."""
+        unit_rounds = self.target_update_unit == "rounds"
+        return unit_rounds and round_index % self.target_update_interval == 0
+
 
 @dataclass(frozen=True)
 class EvalConfig:
@@ -288,9 +367,16 @@ class EvalConfig:
     syntax of ``eval_contexts``, whose keys it overrides); each is played on the same test
     seeds and reported beside the main test. The paper's evaluation at coef 1.5 is
     ``coef=1.5``."""
+    win_rule: str = "referee"
+    """Which win rate is the run's figure (the one printed, and the one ``keep_best``
+    selects by): referee (the referee's outcome: a wipe-out, or more HP at the time limit)
+    or released (the released code's rule: agent 0's reward at the last decision above 13,
+    common/rollout.py). Every evaluation records both (``win_rate`` and
+    ``released_win_rate``)."""
 
     def __post_init__(self) -> None:
         check_types(self)
+        check_choice("win_rule", self.win_rule, WIN_RULES)
         check_positive(self, "eval_episodes", "final_eval_episodes", "checkpoint_every")
         for name, spec in self.context_specs().items():
             if not spec.fixed:

@@ -36,15 +36,24 @@ ENV_KINDS = ("inprocess", "remote")
 MASK_AXES = ("n_agents", "n_actions")
 
 
+RELEASED_WIN_REWARD = 13.0
+"""The released code's win rule: an episode is won when agent 0's reward at the last
+decision is above this (common/rollout.py; a win pays +20, a loss −20)."""
+
+
 def summarize(episodes: Iterable[Episode]) -> dict[str, float]:
-    """Win, draw and loss rates and the mean team return of finished episodes."""
+    """Win, draw and loss rates by the referee, the win rate by the released code's rule
+    (:data:`RELEASED_WIN_REWARD`), and the mean team return of finished episodes."""
     eps = list(episodes)
     if not eps:
         raise ValueError("no episodes to summarise")
     winners = [e.info.get("winner") for e in eps]
     n = len(eps)
+    # Every robot of a team gets the same reward, so the team's is agent 0's.
+    released = sum(float(e.rewards[-1]) > RELEASED_WIN_REWARD for e in eps)
     return {
         "win_rate": sum(w == "blue" for w in winners) / n,
+        "released_win_rate": released / n,
         "draw_rate": sum(w == "draw" for w in winners) / n,
         "loss_rate": sum(w == "red" for w in winners) / n,
         "mean_return": float(np.mean([e.total_reward for e in eps])),
@@ -169,6 +178,9 @@ def act_greedily(
     q = policy.q_values(obs)
     if shape is None:
         allowed = action_mask(avail, tuple(q.shape), MASK_AXES)
+    spec = getattr(policy, "spec", None)
+    if spec is not None:  # a policy trained without masks acts without them
+        allowed = spec.mask(allowed)
     chosen = masked_greedy(q, allowed)
     policy.chose(chosen)
     value = float(q.gather(-1, chosen.unsqueeze(-1)).sum())

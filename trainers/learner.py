@@ -1,9 +1,10 @@
-"""The one Q-learning core: recurrent agents, a pluggable mixer, double Q, target networks.
+"""The one Q-learning core: a shared agent network, a pluggable mixer, target networks.
 
 IQL, VDN and QMIX differ only in the mixer (:mod:`neuronsmae.trainers.mixers`); everything
-else — the shared GRU agent, double Q-learning with target networks refreshed every
-``target_update_interval`` updates, masked TD loss over padded episodes, gradient clipping —
-is this one class, so the three algorithms are compared on equal terms.
+else — the shared agent (a GRU, or the released code's MLP), one-step or TD(λ) targets with
+or without double Q, hard target refreshes, the masked TD loss over padded episodes (or over
+single transitions, ``T = 1``), gradient clipping — is this one class, so the three
+algorithms, and this project's learner and the released one, are compared on equal terms.
 """
 
 from __future__ import annotations
@@ -17,7 +18,13 @@ import torch
 from torch import nn
 
 from neuronsmae.protocol.env_info import EnvInfo
-from neuronsmae.trainers.agent import RNNAgent, agent_input_dim, build_inputs, masked_greedy
+from neuronsmae.trainers.agent import (
+    AGENT_NETWORKS,
+    RNNAgent,
+    agent_input_dim,
+    build_inputs,
+    masked_greedy,
+)
 from neuronsmae.trainers.buffer import Batch
 from neuronsmae.trainers.config_groups import LearnerConfig
 from neuronsmae.trainers.features import (
@@ -79,6 +86,18 @@ class AgentSpec:
     env_info: dict[str, Any] | None = None
     """The environment's ``get_env_info()``: the layout the features and the points head
     read (needed unless ``features='raw'`` and ``head='flat'``)."""
+    network: str = "gru"
+    """The agent network (:data:`~neuronsmae.trainers.agent.AGENT_NETWORKS`): gru or mlp."""
+    masked: bool = True
+    """Act within the environment's action masks; False: every action is open to the
+    agents, as with the released code's all-ones masks."""
+
+    def mask(self, avail: Any) -> Any:
+        """The mask the agents act with: ``avail`` itself, or all ones when not
+        :attr:`masked` (a NumPy array or a tensor of ``avail``'s shape)."""
+        if self.masked:
+            return avail
+        return torch.ones_like(avail) if isinstance(avail, torch.Tensor) else np.ones_like(avail)
 
     def layout(self) -> EnvInfo:
         """The environment's layout, parsed from :attr:`env_info`."""
@@ -105,11 +124,13 @@ class AgentSpec:
         )
 
     def build(self) -> RNNAgent:
-        """A fresh network with this architecture."""
+        """A fresh network with this architecture (an ``RNNAgent`` or an ``MLPAgent``; both
+        are called alike)."""
         index = None
         if self.head == "points":
             index = torch.as_tensor(action_feature_index(self.features, self.layout()))
-        return RNNAgent(self.input_dim, self.n_actions, self.hidden_dim, index)
+        network = AGENT_NETWORKS[self.network]
+        return network(self.input_dim, self.n_actions, self.hidden_dim, index)  # type: ignore[return-value]
 
 
 def agent_spec(
@@ -120,6 +141,8 @@ def agent_spec(
     features: str = "raw",
     head: str = "flat",
     info: EnvInfo | None = None,
+    network: str = "gru",
+    masked: bool = True,
 ) -> AgentSpec:
     """The agent architecture for an environment and the chosen input options.
 
@@ -135,20 +158,29 @@ def agent_spec(
     )
     env_info = None if info is None else info.to_dict()
     return AgentSpec(
-        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, env_info
-    )
+        width, env.n_actions, hidden_dim, last_action, agent_id, features, head, env_info,
+        network, masked,
+    )  # fmt: skip
 
 
-def sequence_q(agent: RNNAgent, spec: AgentSpec, batch: Batch) -> torch.Tensor:
-    """Q-values of every agent at every step of the batch: ``[B, T+1, n, A]``.
+def sequence_q(
+    agent: RNNAgent, spec: AgentSpec, batch: Batch, steps: slice = slice(None)
+) -> torch.Tensor:
+    """Q-values of every agent at the batch's ``steps`` (default all): ``[B, T', n, A]``.
 
-    Agents are folded into the batch (``[B·n, T+1, D]``) so one GRU call covers them all.
+    Agents are folded into the batch (``[B·n, T', D]``) so one call covers them all. A
+    recurrent network runs the whole sequence and is sliced afterwards (its state needs
+    every step); a network without memory (``spec.network == "mlp"``) is run on the asked
+    steps alone, the same values at a fraction of the work.
     """
-    inputs = spec.inputs(batch.obs, batch.last_actions)
+    obs, last = batch.obs, batch.last_actions
+    if spec.network == "mlp":
+        obs, last, steps = obs[:, steps], last[:, steps], slice(None)
+    inputs = spec.inputs(obs, last)
     b, t1, n, d = inputs.shape
     flat = inputs.permute(0, 2, 1, 3).reshape(b * n, t1, d)
     q, _ = agent(flat, agent.initial_hidden(b * n))
-    return q.view(b, n, t1, -1).permute(0, 2, 1, 3)
+    return q.view(b, n, t1, -1).permute(0, 2, 1, 3)[:, steps]
 
 
 def lambda_returns(
@@ -178,8 +210,14 @@ def lambda_returns(
     return out
 
 
+MIXER_STATES = ("state", "agent0_obs")
+"""What QMIX's hypernetworks read: the environment's global state, or agent 0's observation
+as its agent network sees it (the released code's ``get_state``)."""
+
+
 class QLearner:
-    """Trains the shared agent and the mixer from batches of padded episodes."""
+    """Trains the shared agent and the mixer from batches of padded episodes (or of one-step
+    sequences: a transition replay's batches, ``T = 1``)."""
 
     def __init__(
         self,
@@ -190,52 +228,78 @@ class QLearner:
         lr: float,
         gamma: float,
         grad_clip: float,
-        target_update_interval: int,
+        target_update_interval: int | None,
         double_q: bool,
         mixer_embed: int,
         hypernet_hidden: int,
         td_lambda: float = 0.0,
+        hypernet_layers: int = 2,
+        mixer_state: str = "state",
+        mask_destroyed: bool = True,
     ) -> None:
+        if mixer_state not in MIXER_STATES:
+            raise ValueError(f"mixer_state={mixer_state!r}; valid: {', '.join(MIXER_STATES)}")
         self.env, self.spec, self.mixer_name = env, spec, mixer
         self.td_lambda = td_lambda
         self.gamma, self.grad_clip, self.double_q = gamma, grad_clip, double_q
         self.target_update_interval = target_update_interval
+        """Updates between hard target refreshes; None: only when :meth:`update_targets`
+        is called (the trainer's per-round cadence)."""
+        self.mixer_state, self.mask_destroyed = mixer_state, mask_destroyed
         self.agent = spec.build()
-        self.mixer = make_mixer(mixer, env.n_agents, env.state_dim, mixer_embed, hypernet_hidden)
+        state_dim = env.obs_dim if mixer_state == "agent0_obs" else env.state_dim
+        self.mixer = make_mixer(mixer, env.n_agents, state_dim, mixer_embed, hypernet_hidden,
+                                hypernet_layers)  # fmt: skip
         self.target_agent = copy.deepcopy(self.agent)
         self.target_mixer = copy.deepcopy(self.mixer)
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
+        self.samples = 0
+        """Decision steps drawn into updates so far (padding not counted)."""
 
     @classmethod
     def from_config(cls, env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig) -> QLearner:
         """The learner of algorithm ``alg`` (its mixer by name) with the ``learner`` group's
         settings."""
+        per_update = cfg.target_update_unit == "updates"
         return cls(
             env, spec, mixer_for_algorithm(alg), lr=cfg.lr, gamma=cfg.gamma,
-            grad_clip=cfg.grad_clip, target_update_interval=cfg.target_update_interval,
+            grad_clip=cfg.grad_clip,
+            target_update_interval=cfg.target_update_interval if per_update else None,
             double_q=cfg.double_q, mixer_embed=cfg.mixer_embed,
             hypernet_hidden=cfg.hypernet_hidden, td_lambda=cfg.td_lambda,
+            hypernet_layers=cfg.hypernet_layers, mixer_state=cfg.mixer_state,
+            mask_destroyed=cfg.mask_destroyed,
         )  # fmt: skip
+
+    def _mixer_states(self, batch: Batch) -> torch.Tensor:
+        """What the mixer reads at every step ``[B, T+1, S]``."""
+        return batch.obs[:, :, 0] if self.mixer_state == "agent0_obs" else batch.state
 
     def train(self, batch: Batch) -> dict[str, float]:
         """One gradient step on the masked TD loss; refresh the targets when due."""
-        q_all = sequence_q(self.agent, self.spec, batch)  # [B, T+1, n, A]
-        chosen = q_all[:, :-1].gather(-1, batch.actions.unsqueeze(-1)).squeeze(-1)  # [B, T, n]
+        # [B, T+1, n, A]; the last step only where double Q picks the next action with it
+        q_all = sequence_q(self.agent, self.spec, batch, slice(None if self.double_q else -1))
+        chosen = q_all[:, : batch.actions.shape[1]].gather(-1, batch.actions.unsqueeze(-1))
+        chosen = chosen.squeeze(-1)  # [B, T, n]
+        states = self._mixer_states(batch)
+        # A destroyed robot's Q says nothing (it can only no-op): zeroed in the mixer's input
+        # and left out of IQL's loss, unless the released code's choice (mask_destroyed off).
+        alive = batch.alive if self.mask_destroyed else torch.ones_like(batch.alive)
         with torch.no_grad():
-            target_all = sequence_q(self.target_agent, self.spec, batch)[:, 1:]  # [B, T, n, A]
+            target_all = sequence_q(self.target_agent, self.spec, batch, slice(1, None))
             avail_next = batch.avail[:, 1:]
             if self.double_q:
                 best = masked_greedy(q_all[:, 1:].detach(), avail_next)
                 target_max = target_all.gather(-1, best.unsqueeze(-1)).squeeze(-1)
             else:
                 target_max = target_all.masked_fill(~avail_next, float("-inf")).max(-1).values
-            target_max = torch.nan_to_num(target_max, neginf=0.0) * batch.alive[:, 1:]
-            target_tot = self.target_mixer(target_max, batch.state[:, 1:])  # [B, T, 1 or n]
+            target_max = torch.nan_to_num(target_max, neginf=0.0) * alive[:, 1:]
+            target_tot = self.target_mixer(target_max, states[:, 1:])  # [B, T, 1 or n]
             ended = batch.terminated.unsqueeze(-1)  # [B, T, 1]
             if not self.mixer.team_output:  # IQL: a robot's own episode ends at its destruction
-                ended = torch.maximum(ended, 1.0 - batch.alive[:, 1:])  # [B, T, n]
+                ended = torch.maximum(ended, 1.0 - alive[:, 1:])  # [B, T, n]
             targets = lambda_returns(
                 batch.rewards.unsqueeze(-1),
                 ended,
@@ -243,10 +307,10 @@ class QLearner:
                 self.gamma,
                 self.td_lambda,
             )
-        q_tot = self.mixer(chosen * batch.alive[:, :-1], batch.state[:, :-1])
+        q_tot = self.mixer(chosen * alive[:, :-1], states[:, :-1])
         mask = batch.filled.unsqueeze(-1).expand_as(q_tot)
         if not self.mixer.team_output:  # IQL: a destroyed robot has no TD error of its own
-            mask = mask * batch.alive[:, :-1]
+            mask = mask * alive[:, :-1]
         td = (q_tot - targets) * mask  # [B, T, 1 or n]
         loss = (td**2).sum() / mask.sum().clamp(min=1.0)
         self.optimizer.zero_grad(set_to_none=True)
@@ -254,7 +318,9 @@ class QLearner:
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
         self.optimizer.step()
         self.updates += 1
-        if self.updates % self.target_update_interval == 0:
+        self.samples += int(batch.filled.sum())
+        every = self.target_update_interval
+        if every is not None and self.updates % every == 0:
             self.update_targets()
         return {
             "loss": float(loss.detach()),
@@ -283,6 +349,7 @@ class QLearner:
             "target_mixer": self.target_mixer.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "updates": self.updates,
+            "samples": self.samples,
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -293,3 +360,4 @@ class QLearner:
         self.target_mixer.load_state_dict(state["target_mixer"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.updates = int(state["updates"])
+        self.samples = int(state.get("samples", 0))

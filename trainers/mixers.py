@@ -55,27 +55,40 @@ class QMixer(nn.Module):
 
     The absolute value on the hypernetworks' weight outputs is what makes ``Q_tot``
     monotonic (non-decreasing) in every agent's Q, so each agent's greedy action is also the
-    team's greedy action. The biases may be negative; they do not affect monotonicity.
+    team's greedy action. The biases may be negative; they do not affect monotonicity. The
+    weight hypernetworks have two layers (``hypernet_hidden`` wide) or one.
     """
 
     team_output = True
 
     def __init__(
-        self, n_agents: int, state_dim: int, embed_dim: int = 32, hypernet_hidden: int = 64
+        self,
+        n_agents: int,
+        state_dim: int,
+        embed_dim: int = 32,
+        hypernet_hidden: int = 64,
+        hypernet_layers: int = 2,
     ) -> None:
         super().__init__()
         self.n_agents = n_agents
         self.state_dim = state_dim
         self.embed_dim = embed_dim
-        # Two-layer hypernetworks for the weights (as in PyMARL's ``hypernet_layers=2``).
-        self.hyper_w1 = nn.Sequential(
-            nn.Linear(state_dim, hypernet_hidden),
-            nn.ReLU(),
-            nn.Linear(hypernet_hidden, n_agents * embed_dim),
-        )
-        self.hyper_w2 = nn.Sequential(
-            nn.Linear(state_dim, hypernet_hidden), nn.ReLU(), nn.Linear(hypernet_hidden, embed_dim)
-        )
+        if hypernet_layers == 2:  # PyMARL's ``hypernet_layers=2``
+            self.hyper_w1: nn.Module = nn.Sequential(
+                nn.Linear(state_dim, hypernet_hidden),
+                nn.ReLU(),
+                nn.Linear(hypernet_hidden, n_agents * embed_dim),
+            )
+            self.hyper_w2: nn.Module = nn.Sequential(
+                nn.Linear(state_dim, hypernet_hidden),
+                nn.ReLU(),
+                nn.Linear(hypernet_hidden, embed_dim),
+            )
+        elif hypernet_layers == 1:  # one linear layer each (the released code's)
+            self.hyper_w1 = nn.Linear(state_dim, n_agents * embed_dim)
+            self.hyper_w2 = nn.Linear(state_dim, embed_dim)
+        else:
+            raise ValueError(f"hypernet_layers must be 1 or 2, got {hypernet_layers!r}")
         self.hyper_b1 = nn.Linear(state_dim, embed_dim)
         self.hyper_b2 = nn.Sequential(
             nn.Linear(state_dim, embed_dim), nn.ReLU(), nn.Linear(embed_dim, 1)
@@ -98,13 +111,13 @@ class QMixer(nn.Module):
         return (torch.bmm(hidden, w2) + b2).view(batch, steps, 1)
 
 
-MixerFactory = Callable[[int, int, int, int], nn.Module]
-"""``(n_agents, state_dim, embed_dim, hypernet_hidden) → mixer``."""
+MixerFactory = Callable[[int, int, int, int, int], nn.Module]
+"""``(n_agents, state_dim, embed_dim, hypernet_hidden, hypernet_layers) → mixer``."""
 
 MIXERS: dict[str, MixerFactory] = {
-    "none": lambda n, s, e, h: IdentityMixer(),
-    "vdn": lambda n, s, e, h: VDNMixer(),
-    "qmix": lambda n, s, e, h: QMixer(n, s, e, h),
+    "none": lambda n, s, e, h, layers: IdentityMixer(),
+    "vdn": lambda n, s, e, h, layers: VDNMixer(),
+    "qmix": lambda n, s, e, h, layers: QMixer(n, s, e, h, layers),
 }
 """The registry: mixer name → factory. Register a new mixer by adding an entry here."""
 
@@ -123,7 +136,12 @@ def mixer_for_algorithm(alg: str) -> str:
 
 
 def make_mixer(
-    name: str, n_agents: int, state_dim: int, embed_dim: int = 32, hypernet_hidden: int = 64
+    name: str,
+    n_agents: int,
+    state_dim: int,
+    embed_dim: int = 32,
+    hypernet_hidden: int = 64,
+    hypernet_layers: int = 2,
 ) -> nn.Module:
     """Build the mixer registered as ``name``; raise listing the registered names."""
     try:
@@ -132,4 +150,4 @@ def make_mixer(
         raise UnknownMixerError(
             f"unknown mixer {name!r}; valid: {', '.join(sorted(MIXERS))}"
         ) from None
-    return factory(n_agents, state_dim, embed_dim, hypernet_hidden)
+    return factory(n_agents, state_dim, embed_dim, hypernet_hidden, hypernet_layers)

@@ -118,7 +118,7 @@ class GreedyTeam:
         inputs = self.spec.inputs(x, self.last[index])  # [m, n, input]
         hidden = self.hidden[index].reshape(1, m * n, -1)
         q, hidden = self.agent(inputs.reshape(m * n, 1, -1), hidden)
-        chosen = masked_greedy(q[:, 0], mask.reshape(m * n, -1)).reshape(m, n)
+        chosen = masked_greedy(q[:, 0], self.spec.mask(mask).reshape(m * n, -1)).reshape(m, n)
         self.hidden[index] = hidden.reshape(m, n, -1)
         self.last[index] = chosen
         return chosen.numpy()

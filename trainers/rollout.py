@@ -169,16 +169,18 @@ class _Track:
 
 
 class _Arrays:
-    """What the worker's arenas show now: blue's featurized observations and masks, the
+    """What the worker's arenas show now: blue's featurized observations and the masks its
+    agents act with (the policy's :meth:`~.learner.AgentSpec.mask` of the arenas'), the
     global state, and red's raw observations and masks (competitive mode; else empty)."""
 
     def __init__(self, raw: np.ndarray, state: np.ndarray, avail: np.ndarray, n: int,
-                 featurize: Any) -> None:  # fmt: skip
-        self.obs, self.state, self.avail = featurize(raw[:, :n]), state, avail[:, :n]
+                 spec: AgentSpec, featurize: Any) -> None:  # fmt: skip
+        self.obs, self.state = featurize(raw[:, :n]), state
+        self.avail = spec.mask(avail[:, :n])
         self.red_obs, self.red_avail = raw[:, n:], avail[:, n:]
 
-    def updated(self, rows: slice, raw: np.ndarray, env: VecArenaAPI, n: int, featurize: Any
-                ) -> _Arrays:  # fmt: skip
+    def updated(self, rows: slice, raw: np.ndarray, env: VecArenaAPI, n: int,
+                spec: AgentSpec, featurize: Any) -> _Arrays:  # fmt: skip
         """Fresh copies with ``rows`` taken from the step just received (the episodes keep
         views of the old arrays)."""
         new = object.__new__(_Arrays)
@@ -186,7 +188,7 @@ class _Arrays:
         for name in ("obs", "state", "avail", "red_obs", "red_avail"):
             setattr(new, name, getattr(self, name).copy())
         new.obs[rows] = featurize(raw[rows, :n])
-        new.state[rows], new.avail[rows] = state[rows], avail[rows, :n]
+        new.state[rows], new.avail[rows] = state[rows], spec.mask(avail[rows, :n])
         new.red_obs[rows], new.red_avail[rows] = raw[rows, n:], avail[rows, n:]
         return new
 
@@ -377,7 +379,7 @@ class RolloutWorker:
             [None if f is None else dict(f[1].contexts) for f in first],
             [None if f is None else f[1].seed for f in first],
         )
-        now = _Arrays(raw, env.get_state(), env.get_avail_actions(), n, featurize)
+        now = _Arrays(raw, env.get_state(), env.get_avail_actions(), n, spec, featurize)
         bounds = np.cumsum([0, *shares_of(k, self.groups)])  # as the servers' shares
         groups = [_Slots(self, lo, hi) for lo, hi in itertools.pairwise(bounds)]
         for g in groups:
@@ -391,7 +393,7 @@ class RolloutWorker:
                     continue
                 step = handle.result()
                 # Only this group's rows changed.
-                now = now.updated(slice(g.lo, g.hi), step[0], env, n, featurize)
+                now = now.updated(slice(g.lo, g.hi), step[0], env, n, spec, featurize)
                 g.receive(step, now, queue, out)
                 pending[i] = g.send(spec, now) if g.busy else None
         return [episode for episode in out if episode is not None]

@@ -41,8 +41,7 @@ from neuronsmae.protocol import EnvInfo, InvalidContextError
 from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.protocol.errors import ClosedError
 from neuronsmae.protocol.levels import level_from_arg
-from neuronsmae.trainers.agent import epsilon_at
-from neuronsmae.trainers.buffer import Episode, EpisodeReplayBuffer, ReplayMemoryError
+from neuronsmae.trainers.buffer import REPLAYS, Episode, ReplayMemoryError
 from neuronsmae.trainers.checkpoint import (
     CHECKPOINT_NAME,
     CheckpointError,
@@ -54,7 +53,7 @@ from neuronsmae.trainers.checkpoint import (
 )
 from neuronsmae.trainers.competition import Competition
 from neuronsmae.trainers.config import ConfigError, TrainConfig, check_resumable, make_config
-from neuronsmae.trainers.config_groups import TEST_SEED_OFFSET
+from neuronsmae.trainers.config_groups import TEST_SEED_OFFSET, WIN_RULES
 from neuronsmae.trainers.contexts import ContextSpec
 from neuronsmae.trainers.evaluate import summarize
 from neuronsmae.trainers.experimental import StartReplay
@@ -178,15 +177,15 @@ class Trainer:
         self.env = EnvSpec.of(info, lc.features)
         self.spec = agent_spec(
             self.env, lc.agent_hidden, lc.last_action_input, lc.agent_id_input, lc.features,
-            lc.head, info,
+            lc.head, info, lc.agent_net, lc.action_masks == "env",
         )  # fmt: skip
         self.competition.load_fixed(info)
         self.learner = QLearner.from_config(self.env, self.spec, cfg.alg, cfg.learner)
         self.group = task_group(parse_generators(lc.augment), lc.features, info)
         env, size = self.env, cfg.learner.buffer_size
         try:
-            self.buffer = EpisodeReplayBuffer(size, env.n_agents, env.obs_dim, env.state_dim,
-                                              env.n_actions, env.episode_limit)  # fmt: skip
+            self.buffer = REPLAYS[lc.replay](size, env.n_agents, env.obs_dim, env.state_dim,
+                                             env.n_actions, env.episode_limit)  # fmt: skip
         except ReplayMemoryError as err:
             raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
 
@@ -352,9 +351,7 @@ class Trainer:
 
     def _request(self, k: int) -> Request:
         cfg = self.cfg
-        eps = epsilon_at(
-            k, cfg.learner.eps_start, cfg.learner.eps_end, cfg.learner.eps_anneal_episodes
-        )
+        eps = cfg.epsilon(k)
         seed = self.starts.choose(train_seed(cfg.seed, k, cfg.eval.eval_seed))
         contexts = {**self.opponent, **self.train_contexts.sample(cfg.seed, k)}
         if not self.competition.enabled:
@@ -381,10 +378,8 @@ class Trainer:
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
         if rounds and len(self.buffer) >= cfg.learner.learning_starts:
-            for _ in range(rounds * cfg.learner.updates_per_round):
-                batch = self.buffer.sample(cfg.learner.batch_size, self.np_rng)
-                self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
-            c.updates = self.learner.updates
+            for _ in range(rounds):
+                self._learn_round()
             self.sampler.broadcast(self._policy())
         if self.competition.pool.snapshot_due(before, c.episodes):
             self._snapshot()
@@ -403,6 +398,20 @@ class Trainer:
             self.checkpoint()
         if self.hook is not None:
             self.hook(self)
+
+    def _learn_round(self) -> None:
+        """One round of updates (``learner.updates_in_round`` of them, from what is stored);
+        the targets are copied after its first update when ``learner.refreshes_targets``
+        says so for this round."""
+        lc, c = self.cfg.learner, self.counters
+        refresh = lc.refreshes_targets(c.rounds)
+        for u in range(lc.updates_in_round(len(self.buffer))):
+            batch = self.buffer.sample(lc.batch_size, self.np_rng)
+            self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
+            if refresh and u == 0:
+                self.learner.update_targets()
+        c.rounds += 1
+        c.updates, c.samples = self.learner.updates, self.learner.samples
 
     def _rounds_due(self, before: int, after: int) -> int:
         if self.cfg.sync:
@@ -427,12 +436,7 @@ class Trainer:
         elapsed = max(time.perf_counter() - self.session_start, 1e-9)
         return {
             **asdict(c),
-            "epsilon": epsilon_at(
-                c.episodes,
-                self.cfg.learner.eps_start,
-                self.cfg.learner.eps_end,
-                self.cfg.learner.eps_anneal_episodes,
-            ),
+            "epsilon": self.cfg.epsilon(c.episodes),
             "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
             "train_return": summarize(recent)["mean_return"] if recent else 0.0,
             "env_steps_per_s": self.session_steps / elapsed,
@@ -472,7 +476,8 @@ class Trainer:
         self.evals.append(row)
         # On a tie the later weights win: they trained longer, and a 50-episode validation
         # figure cannot tell two equal readings apart anyway.
-        better = self.best is None or row["win_rate"] >= self.best[1]["win_rate"]
+        figure = WIN_RULES[cfg.eval.win_rule]
+        better = self.best is None or row[figure] >= self.best[1][figure]
         if split == "validation" and cfg.eval.keep_best and better:
             self.best = (evaluated.weights, row)
             self.checkpoint()  # first: best.pt never runs ahead of the point a resume takes

@@ -7,10 +7,12 @@ afresh at every decision. Where each rule comes from (docs/contexts.md, "Bots"):
 
 * released build, level ``0`` (also the name ``random``) — :class:`RandomBot`: a random
   live target and a random candidate point per robot, drawn from the arena's RNG;
-* released build, level ``1``, and the paper's ``middle`` — :class:`MiddleBot`: attack the
-  live enemy with the least HP (a plain argmin over the enemies in order: ties go to the
-  first), each robot from its own nearest candidate point of that enemy. The released
-  level's description and the paper's sentence give the same rule, so both share this class;
+* the paper's ``middle`` — :class:`MiddleBot`: attack the live enemy with the least HP (a
+  plain argmin over the enemies in order: ties go to the first), each robot from its own
+  nearest candidate point of that enemy, the paper's sentence read literally;
+* released build, level ``1`` — :class:`ReleasedLevel1Bot`: middle's target, and R1's
+  nearest point as middle's, but R2 takes its nearest point *other than R1's* (the
+  build's managed code, docs/reference.md);
 * the paper's ``easy`` — :class:`EasyBot`: each robot attacks its nearest live enemy from
   its own nearest candidate point of that enemy;
 * the paper's ``hard`` — :class:`HardBot`: "two robots siege the robot with the least HP at
@@ -132,14 +134,14 @@ class EasyBot:
 
 
 class MiddleBot:
-    """The paper's middle bot and the released build's level 1 (one rule, read literally).
+    """The paper's middle bot, its sentence read literally.
 
     Paper: "The middle bot goes to the nearest candidate point to attack the robot with the
-    least HP." Released level 1: least-HP target, each robot its own nearest point. The team
-    attacks the live enemy with the least HP, a plain argmin over the enemies in order, so
-    ties (equal HP, as at the start) go to the first enemy and both robots share the target;
-    each robot drives to its own nearest candidate point around it (two robots may pick the
-    same point; the planner keeps them from overlapping).
+    least HP." The team attacks the live enemy with the least HP, a plain argmin over the
+    enemies in order, so ties (equal HP, as at the start) go to the first enemy and both
+    robots share the target; each robot drives to its own nearest candidate point around it
+    (two robots may pick the same point; the planner keeps them from overlapping). The
+    released build's level 1 differs in one point: :class:`ReleasedLevel1Bot`.
     """
 
     def __init__(self, rng: np.random.Generator) -> None:
@@ -148,6 +150,37 @@ class MiddleBot:
     def act(self, view: BotView) -> list[Choice]:
         e = _least_hp(view, _live(view))
         return [(e, _nearest_point(view, i, e)) for i in range(len(view.robots))]
+
+
+class ReleasedLevel1Bot:
+    """The released build's level 1, as its managed code has it: the live enemy with the
+    lower HP (ties: the first), R1 at that enemy's candidate point nearest itself, and R2 at
+    the point nearest itself *excluding R1's* (docs/reference.md, "The released Unity
+    build"). More robots follow R2's rule: each skips the points the live robots before it
+    took. Points are excluded by their slot in the enemy's list of ``k`` (what the build
+    indexes; a robot's list differs from its mate's only where its own clearance square
+    dropped a sample), and only a live robot takes one. With every slot taken the robot
+    takes its nearest anyway.
+    """
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def act(self, view: BotView) -> list[Choice]:
+        e = _least_hp(view, _live(view))
+        taken: list[int] = []
+        out = []
+        for i, r in enumerate(view.robots):
+            travel = _travel(view, i, e)
+            free = np.ones(travel.size, dtype=bool)
+            free[taken] = False
+            if not free.any():
+                free[:] = True
+            c = int(np.argmin(np.where(free, travel, np.inf)))
+            if view.alive[r]:
+                taken.append(c)
+            out.append((e, c))
+        return out
 
 
 _STATIC_BOXES = F.obstacle_array(tall_only=True)
@@ -359,7 +392,10 @@ BOTS: dict[str, Callable[[np.random.Generator], Bot]] = {
 }
 """Bot classes by level name (the names of ``neuronsmae.protocol.levels.LEVEL_NAMES``)."""
 
-RELEASED_BOTS: dict[int, Callable[[np.random.Generator], Bot]] = {0: RandomBot, 1: MiddleBot}
+RELEASED_BOTS: dict[int, Callable[[np.random.Generator], Bot]] = {
+    0: RandomBot,
+    1: ReleasedLevel1Bot,
+}
 """Bot classes by the released build's level number (``RELEASED_LEVELS``)."""
 
 

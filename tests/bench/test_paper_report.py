@@ -9,15 +9,21 @@ from typing import Any
 
 import pytest
 
-from bench.paper_table import interval, main, report, set_aside
+from bench.paper_report import interval, report
+from bench.paper_table import main, set_aside
 
 
 def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper") -> dict:
-    test: dict[str, Any] = {"main": {"win_rate": rate}}
-    if learner == "paper":
-        test["coef=1.5"] = {"win_rate": rate / 2}
+    test: dict[str, Any] = {}
+    if learner == "paper":  # coef 1.5 (main) and coef 1.0, the released rule beside the referee
+        test["main"] = {"released_win_rate": rate / 2, "win_rate": rate / 2,
+                        "draw_rate": 0.0, "loss_rate": 1 - rate / 2}  # fmt: skip
+        test["coef=1.0"] = {"released_win_rate": rate, "win_rate": rate}
+    else:
+        test["main"] = {"win_rate": rate}
     return {"alg": alg, "level": level, "seed": seed, "learner": learner, "test": test,
-            "episodes": 30_000, "env_steps": 1_480_000, "wall_minutes": 30.0}  # fmt: skip
+            "episodes": 30_000, "env_steps": 1_480_000, "wall_minutes": 30.0,
+            "updates": 280_000, "samples": 560_000_000}  # fmt: skip
 
 
 def test_interval_is_the_student_t_half_width_over_seeds() -> None:
@@ -28,29 +34,48 @@ def test_interval_is_the_student_t_half_width_over_seeds() -> None:
     assert interval([0.4]) == (0.4, None)
 
 
+def _rows(text: str) -> dict[tuple[str, str], list[str]]:
+    return {
+        tuple(c.strip() for c in line.split("|")[1:3]): [c.strip() for c in line.split("|")]
+        for line in text.splitlines()
+        if line.startswith("| ") and not line.startswith("| level")
+    }
+
+
 def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> None:
     records = [_record("vdn", "easy", s, r) for s, r in ((1, 0.5), (2, 0.6), (3, 0.7))]
-    records += [_record("iql", "hard", 2, 0.25), _record("vdn", "easy", 1, 0.9, "defaults")]
-    lines = report({"records": records}).splitlines()
-    rows = {tuple(c.strip() for c in line.split("|")[1:3]): line for line in lines[2:11]}
-    assert len(rows) == 9  # three levels × three algorithms, in the paper's order
-    vdn = rows[("easy", "VDN")].split("|")
-    assert vdn[3].strip() == "0.93"  # the paper's figure
-    assert vdn[4].strip().startswith("0.600 ± 0.248 (s1 0.500, s2 0.600, s3 0.700)")
-    assert vdn[5].strip().startswith("0.300 ± 0.124")  # at coef 1.5
-    assert vdn[6].strip() == "0.900 (s1 0.900; 1 of 3 seeds)"  # the project's learner
-    assert "0.250 (s2 0.250; 1 of 3 seeds)" in rows[("hard", "IQL")]
+    records += [_record("iql", "hard", 2, 0.5), _record("vdn", "easy", 1, 0.9, "defaults")]
+    text = report({"records": records})
+    paper = text.split("This project's learner")[0]
+    rows = _rows(paper)
+    assert len(rows) == 11  # three levels × three algorithms, then VDN at levels 0 and 1
+    vdn = rows[("easy", "VDN")]
+    assert vdn[3] == "0.93"  # the paper's figure
+    assert vdn[4].startswith("0.300 ± 0.124 (s1 0.250, s2 0.300, s3 0.350)")  # coef 1.5
+    assert vdn[5] == "0.300 / 0.000 / 0.700"  # the referee's outcomes at coef 1.5
+    assert vdn[6].startswith("0.600 ± 0.248")  # the released rule at coef 1.0
+    assert rows[("hard", "IQL")][4] == "0.250 (s2 0.250; 1 of 3 seeds)"
     assert rows[("middle", "QMIX")].count("—") == 3
-    assert lines[-2].startswith("Paper preset: 4 of 27 runs recorded, 120,000 training")
-    assert "(5.9 million decisions)" in lines[-2]
-    assert "2.0 h of wall time" in lines[-2]
-    assert lines[-1] == (
-        "Project's learner: 1 of 9 runs recorded (VDN), 30,000 training episodes, 0.5 h of "
-        "wall time."
-    )
-    assert not any(
-        line.startswith("Project's") for line in report({"records": records[:4]}).splitlines()
-    )
+    assert rows[("1", "VDN")][3] == "—"  # the paper has no figure for the released levels
+    own = _rows(text.split("This project's learner")[1].split("Compute")[0])
+    assert own[("easy", "VDN")][4] == "0.900 (s1 0.900; 1 of 3 seeds)"
+    compute = text.split("Compute:")[1]
+    assert "paper: 4 of 33 runs recorded, 120,000 training episodes (5.9 million" in compute
+    assert "1,120,000 gradient updates on 2240 million sampled transitions, 2.0 h" in compute
+    assert "defaults: 1 of 9 runs recorded" in compute
+    assert "This project's learner" not in report({"records": records[:4]})
+
+
+def test_report_says_whether_the_papers_orderings_hold() -> None:
+    rates = {("easy", "vdn"): 0.9, ("middle", "vdn"): 0.6, ("hard", "vdn"): 0.4,
+             ("easy", "qmix"): 0.8, ("middle", "qmix"): 0.7, ("hard", "qmix"): 0.75,
+             ("easy", "iql"): 0.5, ("middle", "iql"): 0.3, ("hard", "iql"): 0.2}  # fmt: skip
+    records = [_record(alg, level, 1, 2 * r) for (level, alg), r in rates.items()]
+    text = report({"records": records})
+    assert "- VDN: easy, middle, hard 0.900, 0.600, 0.400: easy > middle > hard holds" in text
+    assert "- QMIX: easy, middle, hard 0.800, 0.700, 0.750: easy > middle > hard does not" in text
+    assert "- easy: VDN 0.900, QMIX 0.800, IQL 0.500: VDN ≥ QMIX > IQL holds" in text
+    assert "- hard: VDN 0.400, QMIX 0.750, IQL 0.200: VDN ≥ QMIX > IQL does not hold" in text
 
 
 def test_main_counts_the_seeds_recorded_beside_those_asked_for(
@@ -60,21 +85,20 @@ def test_main_counts_the_seeds_recorded_beside_those_asked_for(
     records = [_record("vdn", "easy", s, 0.5) for s in (1, 2, 3)]
     out.write_text(json.dumps({"records": records}))
     assert main(["--report", "--seeds", "1", "--out", str(out)]) == 0
-    assert "Paper preset: 3 of 27 runs recorded" in capsys.readouterr().out
+    assert "paper: 3 of 33 runs recorded" in capsys.readouterr().out
 
 
 def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
-    records = [_record("vdn", "easy", s, r) for s, r in ((1, 0.3), (2, 0.4))]
+    records = [_record("vdn", "easy", s, r) for s, r in ((1, 0.6), (2, 0.8))]
     assert "coef=0.5" not in report({"records": records})
-    records[0]["test"]["coef=0.5"] = {"win_rate": 1.0}
+    records[0]["test"]["coef=0.5"] = {"released_win_rate": 1.0}
     lines = report({"records": records}).splitlines()
-    paper = "`--preset paper` (μ 0.5)"
-    head = f"| level | alg | {paper}, coef 1.0 | {paper}, coef=0.5 |"
+    head = "| level | alg | released rule, coef 1.5 | released rule, coef=0.5 |"
     assert head in lines
-    row = next(line for line in lines[-10:] if line.startswith("| easy | VDN"))
-    assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.0
+    row = next(line for line in lines[-11:] if line.startswith("| easy | VDN"))
+    assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.5
     assert row.split("|")[4].strip() == "1.000 (s1 1.000; 1 of 2 seeds)"  # s2 not yet
-    assert lines[-1].startswith("| hard | QMIX | — | — |")
+    assert lines[-1].startswith("| 1 | VDN | — | — |")
 
 
 @pytest.mark.parametrize("key", ["seed=7", "alg=qmix", "level=hard", "out=elsewhere"])

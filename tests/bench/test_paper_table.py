@@ -14,9 +14,9 @@ from neuronsmae.trainers.train import train
 pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 
 TINY = [
-    "episodes=40", "agent_hidden=16", "mixer_embed=8", "hypernet_hidden=8", "batch_size=4",
-    "learning_starts=4", "eval_every=20", "eval_episodes=2", "final_eval_episodes=3",
-    "envs_per_worker=5", "checkpoint_every=20",
+    "episodes=40", "agent_hidden=16", "mixer_embed=8", "batch_size=200", "eval_every=20",
+    "eval_episodes=2", "final_eval_episodes=3", "envs_per_worker=5", "checkpoint_every=20",
+    "updates_per_round=2", "iteration_episodes=10",
 ]  # fmt: skip
 
 
@@ -42,9 +42,19 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
         3,
         "paper",
     )
-    assert line["episodes"] == 40 and line["env_steps"] > 0 and line["updates"] == 2
-    assert set(line["test"]) == {"main", "coef=1.5"}
-    assert line["test"]["main"]["episodes"] == 3 and 0 <= line["test"]["main"]["win_rate"] <= 1
+    # 4 iterations of 10 episodes, each max(2, 2·⌊stored / 200⌋) updates of 200 (the
+    # resumed half starts with an empty replay: a checkpoint holds no replay)
+    assert line["episodes"] == 40 and line["env_steps"] > 0 and line["iterations"] == 4
+    assert line["updates"] > 4 * 2  # more than the floor once 400 transitions are stored
+    assert line["samples"] == 200 * line["updates"]  # ≥ 200 transitions from the first
+    assert (line["win_rule"], line["contexts"]) == ("released", "Friction_coeff=0.5;coef=0.5")
+    assert line["test_contexts"] == {
+        "main": {"level": "hard", "Friction_coeff": 0.5, "coef": 1.5},
+        "coef=1.0": {"level": "hard", "Friction_coeff": 0.5, "coef": 1.0},
+    }
+    assert set(line["test"]) == {"main", "coef=1.0"}
+    main_test = line["test"]["main"]
+    assert main_test["episodes"] == 3 and 0 <= main_test["released_win_rate"] <= 1
     assert line["commit"] and line["wall_minutes"] > 0
     assert line["logs"] == "table_runs/paper/qmix_hard_s3"  # relative to the table's folder
     logs = out.parent / line["logs"]  # what neuronsmae-plot needs, kept beside the table
@@ -53,13 +63,13 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     assert len(json.loads(out.read_text())["records"]) == 1
     assert "| hard | QMIX | 0.34 | 0." in capsys.readouterr().out  # the table, the run in it
     # Tested again at its own test contexts: the same starts and weights, the same figures.
-    assert main([*args, "--test-at", "coef=1.0"]) == 0
-    assert main([*args, "--test-at", "coef=1.0"]) == 0  # already there: not tested again
+    assert main([*args, "--test-at", "coef=1.5"]) == 0
+    assert main([*args, "--test-at", "coef=1.5"]) == 0  # already there: not tested again
     assert "0 record(s) tested" in capsys.readouterr().out
     (line,) = json.loads(out.read_text())["records"]
-    assert line["test"]["coef=1.0"] == line["test"]["main"]
+    assert line["test"]["coef=1.5"] == line["test"]["main"]
     assert main([*args, "--report"]) == 0
-    head = "| `--preset paper` (μ 0.5), coef 1.0 | `--preset paper` (μ 0.5), coef=1.0 |"
+    head = "| level | alg | released rule, coef 1.5 | released rule, coef=1.5 |"
     assert head in capsys.readouterr().out
 
 
@@ -90,7 +100,7 @@ def test_a_run_finished_but_not_recorded_is_recorded_without_training_again(
     assert "recording" in capsys.readouterr().out
     assert (run_dir / "checkpoint.pt").stat().st_mtime_ns == before  # not trained again
     (line,) = json.loads(out.read_text())["records"]
-    assert line["episodes"] == 40 and set(line["test"]) == {"main", "coef=1.5"}
+    assert line["episodes"] == 40 and set(line["test"]) == {"main", "coef=1.0"}
     with (run_dir / "eval.csv").open() as f:
         import csv
 

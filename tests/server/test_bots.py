@@ -22,6 +22,7 @@ from neuronsmae.server.task.bots import (
     MiddleBot,
     MiddleSpreadBot,
     RandomBot,
+    ReleasedLevel1Bot,
     make_bot,
     point_damage,
 )
@@ -72,7 +73,8 @@ def test_every_level_has_a_bot() -> None:
     assert set(BOTS) == set(LEVEL_NAMES)
     assert set(RELEASED_BOTS) == set(RELEASED_LEVELS) == {0, 1}
     assert RELEASED_BOTS[0] is BOTS["random"] is RandomBot
-    assert RELEASED_BOTS[1] is BOTS["middle"] is MiddleBot  # one rule, two names
+    assert RELEASED_BOTS[1] is ReleasedLevel1Bot  # not middle: R2 skips R1's point
+    assert BOTS["middle"] is MiddleBot
     assert (BOTS["easy"], BOTS["hard"]) == (EasyBot, HardBot)
     assert (BOTS["middle_spread"], BOTS["hard_flank"]) == (MiddleSpreadBot, HardFlankBot)
 
@@ -81,10 +83,10 @@ def test_every_level_has_a_bot() -> None:
     ("value", "level", "bot"),
     [
         (0, 0, RandomBot),
-        (1, 1, MiddleBot),
+        (1, 1, ReleasedLevel1Bot),
         (0.0, 0, RandomBot),
-        (1.0, 1, MiddleBot),
-        (np.int64(1), 1, MiddleBot),
+        (1.0, 1, ReleasedLevel1Bot),
+        (np.int64(1), 1, ReleasedLevel1Bot),
         ("easy", "easy", EasyBot),
         ("middle", "middle", MiddleBot),
         ("hard", "hard", HardBot),
@@ -134,7 +136,7 @@ def test_released_scripts_contexts_give_the_released_bots() -> None:
     try:
         arena.reset({"coef": 0.5, "level": 1.0})
         assert arena.context.coef == 0.5 and arena.context.level == 1
-        assert type(arena.bots[RED]) is MiddleBot
+        assert type(arena.bots[RED]) is ReleasedLevel1Bot
         arena.reset({"VK1": 0.0375, "level": 0})
         assert arena.context.blue_dynamics["vk1"] == 0.0375 and arena.context.level == 0
         assert type(arena.bots[RED]) is RandomBot
@@ -361,3 +363,23 @@ def test_hard_flank_flanker_leaves_the_holders_point() -> None:
 def test_hard_flank_lone_survivor_besieges_from_behind() -> None:
     view = _view([(6.0, 2.0), (0.5, 0.5)], alive=[True, False, True, True])
     assert HardFlankBot(rng()).act(view)[0] == (0, 2)
+
+
+# --- the released level 1 -----------------------------------------------------------------
+def test_released_level_1_gives_r2_its_nearest_point_other_than_r1s() -> None:
+    """Both robots are nearest the rear point: middle sends both there, the released level 1
+    sends R2 to its next nearest (the build's managed code)."""
+    view = _scene([(3.0, 2.1), (3.2, 1.9)])
+    assert MiddleBot(rng()).act(view) == [(0, REAR), (0, REAR)]
+    r1, r2 = ReleasedLevel1Bot(rng()).act(view)
+    assert r1 == (0, REAR) and r2[0] == 0 and r2[1] != REAR
+    travel = np.hypot(*(OPEN - (3.2, 1.9)).T)
+    travel[REAR] = np.inf
+    assert r2[1] == int(np.argmin(travel))
+
+
+def test_released_level_1_targets_the_least_hp_enemy_and_a_dead_r1_takes_no_point() -> None:
+    view = _scene([(3.0, 2.1), (3.2, 1.9)], enemy_hp=(600.0, 300.0), alive=[False, True, 1, 1])
+    assert [e for e, _ in ReleasedLevel1Bot(rng()).act(view)] == [1, 1]  # enemy 3: less HP
+    view = _scene([(3.0, 2.1), (3.2, 1.9)], alive=[False, True, True, True])
+    assert ReleasedLevel1Bot(rng()).act(view)[1] == (0, REAR)  # R1 destroyed: R2 is free
