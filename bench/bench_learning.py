@@ -27,18 +27,18 @@ from typing import Any
 
 from bench.common import at_least, non_negative
 from neuronsmae.protocol.errors import InvalidOptionError
-from neuronsmae.trainers.config import (
+from neuronsmae.trainers.core.mixers import ALGORITHMS
+from neuronsmae.trainers.outputs import check_folder
+from neuronsmae.trainers.run.config import (
     LEVELS,
     ConfigError,
     TrainConfig,
     make_config,
     parse_overrides,
 )
-from neuronsmae.trainers.interrupt import TrainingInterrupted
-from neuronsmae.trainers.mixers import ALGORITHMS
-from neuronsmae.trainers.outputs import check_folder
-from neuronsmae.trainers.records import RunExistsError, check_new_run_dir
-from neuronsmae.trainers.train import train
+from neuronsmae.trainers.run.interrupt import TrainingInterrupted
+from neuronsmae.trainers.run.records import RunExistsError, check_new_run_dir
+from neuronsmae.trainers.run.train import train
 
 OUT = Path(__file__).resolve().parent / "out"
 """Where the JSON reports go (ignored by git)."""

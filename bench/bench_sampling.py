@@ -41,9 +41,10 @@ import ray
 from bench.common import Distinct, arena_count, at_least, machine, positive, table, write_json
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.server import Arena
-from neuronsmae.trainers.learner import EnvSpec, agent_spec
-from neuronsmae.trainers.rollout import Policy, Request, RolloutWorker
-from neuronsmae.trainers.sampler import Sampler
+from neuronsmae.trainers.core.acting import Policy
+from neuronsmae.trainers.core.learner import EnvSpec, agent_spec
+from neuronsmae.trainers.play.rollout import Request, RolloutWorker
+from neuronsmae.trainers.run.sampler import Sampler
 
 CONTEXTS = {"level": "easy"}
 EPSILON = 0.2

@@ -2,7 +2,7 @@
 
     python -m bench.bench_scaling [--counts 1 2 4 8] [--envs 8] [--seconds 8] [--repeats 3]
 
-Starts the largest number of servers once with the fleet supervisor (``neuronsmae-serve``'s
+Starts the largest number of servers once with the fleet supervisor (``neuronsmae-fleet``'s
 :class:`~neuronsmae.server.serving.supervisor.Fleet`, unpaced: ``time_scale=0``), each
 holding ``--envs`` arenas (``--arenas``; 1 measures the one-query-per-decision path). For
 each count ``n`` and each repeat, ``n`` client processes (spawned, one per server, like

@@ -13,7 +13,7 @@
    succeeds on the restarted server; whether the retried request said the episode was lost
    (``ResetNeededError``); whether the new episode equals a fresh in-process ``Arena``.
 2. **Ray rollout worker**: ``ray.kill`` of a worker while it plays (as
-   tests/trainers/test_training.py does): restarts, time until the interrupted episodes
+   tests/trainers/run/test_training.py does): restarts, time until the interrupted episodes
    land (replayed whole on a fresh actor), and that no seed is stored twice or partially.
 3. **Learner**: ``neuronsmae-train`` SIGKILLed (its whole process group) some episodes after
    a checkpoint, then ``--resume``: the episodes since the checkpoint and the replay buffer
@@ -56,7 +56,7 @@ PATIENCE = 120.0
 
 
 class Supervised:
-    """``neuronsmae-serve`` with one server; it restarts the server when it dies."""
+    """``neuronsmae-fleet`` with one server; it restarts the server when it dies."""
 
     def __init__(self, port: int, time_scale: float, folder: Path) -> None:
         self.port, self.state = port, folder / f"state-{port}.json"
@@ -210,8 +210,8 @@ learning, are under test); ``envs_per_worker=2`` plays chunks of two episodes.""
 def ray_worker(folder: Path, episodes: int = 16) -> dict[str, Any]:
     import ray
 
-    from neuronsmae.trainers.config import make_config
-    from neuronsmae.trainers.train import Trainer, train_seed
+    from neuronsmae.trainers.run.config import make_config
+    from neuronsmae.trainers.run.train import Trainer, train_seed
 
     base = {"alg": "vdn", "workers": 2, "episodes": episodes, "out": str(folder / "ray"),
             "progress": False, "eval_every": 0}  # fmt: skip
@@ -284,7 +284,7 @@ def learner(folder: Path, how: str, episodes: int = 60, every: int = 10) -> dict
     run = folder / f"learner_{how}"
     pairs = {**TINY, "checkpoint_every": every}
     sets = [a for k, v in pairs.items() for a in ("--set", f"{k}={v}")]
-    cmd = [sys.executable, "-m", "neuronsmae.trainers.cli", "--alg", "vdn", "--level", "easy",
+    cmd = [sys.executable, "-m", "neuronsmae.trainers.run.cli", "--alg", "vdn", "--level", "easy",
            "--workers", "1", "--episodes", str(episodes), "--out", str(run), "--quiet",
            *sets]  # fmt: skip
     log = (folder / f"learner_{how}.log").open("wb")
@@ -312,7 +312,7 @@ def learner(folder: Path, how: str, episodes: int = 60, every: int = 10) -> dict
         return [e for e in _episodes_logged(train_csv) if e > ckpt]
 
     t0 = time.monotonic()
-    resume = [sys.executable, "-m", "neuronsmae.trainers.cli", "--resume", "--out", str(run),
+    resume = [sys.executable, "-m", "neuronsmae.trainers.run.cli", "--resume", "--out", str(run),
               "--quiet"]  # fmt: skip
     second = subprocess.Popen(resume, stdout=log, stderr=log, start_new_session=True)
     first_new = caught_up = None  # the first episode after resuming; the first past at_stop

@@ -43,9 +43,9 @@ from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.protocol.policies import layout_differences
 from neuronsmae.server.arena import Arena
 from neuronsmae.server.sim.field import START_BULLETS
-from neuronsmae.trainers.config import TrainConfig
-from neuronsmae.trainers.evaluate import GreedyPolicy, MatchPolicy, QPolicy, act_greedily
-from neuronsmae.trainers.train import TEST_SEED_OFFSET
+from neuronsmae.trainers.play.evaluate import GreedyPolicy, MatchPolicy, QPolicy, act_greedily
+from neuronsmae.trainers.run.config import TrainConfig
+from neuronsmae.trainers.run.train import TEST_SEED_OFFSET
 
 TEST_SEED = TrainConfig().eval.eval_seed + TEST_SEED_OFFSET
 """First seed of the trainer's test split, so the games are those its final figures count."""

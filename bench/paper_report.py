@@ -16,7 +16,7 @@ from typing import Any
 
 from scipy import stats
 
-from neuronsmae.trainers.plot import PAPER_WIN_RATE as PAPER
+from neuronsmae.trainers.run.plot import PAPER_WIN_RATE as PAPER
 
 ALGS = ("iql", "vdn", "qmix")
 LEVELS = ("easy", "middle", "hard")

@@ -6,7 +6,7 @@
                                 [--report | --test-at KEY=VALUE;...]
 
 ``--learner paper`` (the default) trains every cell with ``--preset paper``, the authors'
-released training code (trainers/config.py ``PRESETS``): 30,000 episodes, then the final
+released training code (trainers/run/config.py ``PRESETS``): 30,000 episodes, then the final
 weights tested on 200 held-out episodes at coef 1.5 with the released win rule, the
 referee's win/draw/loss beside it, and at coef 1.0 as a second column. ``--learner
 defaults`` trains with this project's own learner under a 30-minute budget (VDN by
@@ -54,19 +54,19 @@ from typing import Any
 from bench.common import Distinct, at_least, commit, non_negative
 from bench.paper_report import ALGS, LEARNERS, LEVELS, RELEASED, TEST_FIELDS, report
 from neuronsmae.protocol.contexts import check_contexts
-from neuronsmae.trainers.checkpoint import CHECKPOINT_NAME, load_checkpoint
-from neuronsmae.trainers.config import (
+from neuronsmae.trainers.core.checkpoint import CHECKPOINT_NAME, load_checkpoint
+from neuronsmae.trainers.play.evaluate import evaluate_checkpoint
+from neuronsmae.trainers.run.config import (
     ConfigError,
     TrainConfig,
     make_config,
     parse_overrides,
     preset,
 )
-from neuronsmae.trainers.contexts import ContextSpec
-from neuronsmae.trainers.evaluate import evaluate_checkpoint
-from neuronsmae.trainers.interrupt import TrainingInterrupted
-from neuronsmae.trainers.records import read_records
-from neuronsmae.trainers.train import TEST_SEED_OFFSET, train
+from neuronsmae.trainers.run.contexts import ContextSpec
+from neuronsmae.trainers.run.interrupt import TrainingInterrupted
+from neuronsmae.trainers.run.records import read_records
+from neuronsmae.trainers.run.train import TEST_SEED_OFFSET, train
 
 LEARNER_LAYERS: dict[str, dict[str, Any]] = {
     "defaults": {"eval.extra_test_contexts": "coef=1.5"},

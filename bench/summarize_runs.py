@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.common import add_out, commit, machine, out_problem, table, write_out
-from neuronsmae.trainers.records import read_records
+from neuronsmae.trainers.run.records import read_records
 
 CONFIG_KEYS = ("alg", "level", "seed", "workers", "env", "envs_per_worker", "max_minutes",
                "opponent", "preset", "contexts", "arena", "selfplay")  # fmt: skip

@@ -186,3 +186,21 @@ class Recorder(ArenaWrapper):
         if name == "env":  # not set yet: __init__ failed before it
             raise AttributeError(name)
         return getattr(self.env, name)
+
+
+REPLAY = "neuronsmae.server.tools.replay:replay"
+"""The server's re-simulation of a recording (``neuronsmae-replay``), opened by name."""
+VIDEO = "neuronsmae.server.tools.video:write_video"
+"""The server's frame writer (GIF, or MP4 with the ``video`` extra), opened by name."""
+
+
+def write_replay_video(rec: Recording, path: str | Path) -> None:
+    """Re-simulate ``rec`` in this process and write its rendered frames to ``path``.
+
+    The simulation is the server's, reached by name as ``env="inprocess"`` reaches its
+    arena (:func:`~neuronsmae.client.source.resolve`): the client imports no server module
+    by itself."""
+    from neuronsmae.client.source import resolve
+
+    frames = resolve(REPLAY)(rec, render=True).frames
+    resolve(VIDEO)(path, frames)

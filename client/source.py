@@ -15,9 +15,11 @@ takes ``env=`` one of:
 * a string ``"module:attr"`` naming an arena class or factory, called as
   ``attr(seed=seed, **options)``: ``"neuronsmae.server:Arena"`` (vector faces:
   ``"neuronsmae.server:VecArena"``, called with ``num_envs`` too) runs the arenas in this
-  process. A string, because configuration files (EPyMARL's ``env_args``, YAML, the
-  command line) cannot hold a Python object, and because the client never imports the
-  server by itself.
+  process, and ``"inprocess"`` is short for it (:data:`IN_PROCESS`). A string, because
+  configuration files (EPyMARL's ``env_args``, YAML, the command line) cannot hold a Python
+  object, and because the client never imports the server by itself: the server package is
+  imported by name when such an arena is opened, which is how the trainers reach in-process
+  arenas too (trainers → client → protocol ← server).
 * an arena object (``ArenaAPI``, or ``VecArenaAPI`` for the vector face) or a zero-argument
   factory of one, built by the caller with its own options; no options may be given then.
 
@@ -85,13 +87,21 @@ def check_options(given: Iterable[str], valid: Iterable[str], where: str, hint: 
         )
 
 
-def resolve(name: str) -> Callable[..., Any]:
-    """The object a ``"module:attr"`` string names (imported now)."""
+IN_PROCESS = {"arena": "neuronsmae.server:Arena", "vector": "neuronsmae.server:VecArena"}
+"""What ``env="inprocess"`` names: the server's arena classes, for one arena and for a
+vector of them."""
+
+
+def resolve(name: str, kind: str = "arena") -> Callable[..., Any]:
+    """The object a ``"module:attr"`` string names (imported now); ``"inprocess"`` names
+    the in-process arena of ``kind`` (``arena`` or ``vector``, :data:`IN_PROCESS`)."""
+    if name == "inprocess":
+        name = IN_PROCESS[kind]
     module, sep, attr = name.partition(":")
     if not sep or not module or not attr:
         raise InvalidOptionError(
             f"env={name!r} must name an arena class as 'module:attr', e.g. "
-            "'neuronsmae.server:Arena'"
+            "'neuronsmae.server:Arena', or be 'inprocess'"
         )
     try:
         target: Any = importlib.import_module(module)
@@ -151,7 +161,7 @@ def open_vec_arena(
 
             vec = VecRM(num_envs=num_envs, **{**kwargs, **seeded})
             return vec, seed is not None
-        made = resolve(env)(num_envs=num_envs, **kwargs, **seeded)  # type: ignore[arg-type]
+        made = resolve(env, "vector")(num_envs=num_envs, **kwargs, **seeded)  # type: ignore[arg-type]
         return _checked(made, VecArenaAPI, env), seed is not None
     _refuse_beside(kwargs, seed)
     vec = _given(env, VecArenaAPI)
@@ -159,6 +169,23 @@ def open_vec_arena(
         vec.close()
         raise InvalidOptionError(f"num_envs={num_envs} but env holds {vec.num_envs} arenas")
     return vec, True
+
+
+def make_arena(env: ArenaSource = None, seed: int | None = None, **options: Any) -> ArenaAPI:
+    """One arena from ``env`` as the faces take it: None (a private unpaced server),
+    ``"inprocess"`` (the server's ``Arena`` in this process, imported by name), a
+    ``"module:attr"`` name, an arena or a factory; ``options`` are the arena options (and
+    ``RM``'s, for a server). The caller closes it."""
+    return open_arena(env, seed, options, "make_arena")[0]
+
+
+def make_vec_arena(
+    env: Any = None, seed: int | None = None, num_envs: int = 1, **options: Any
+) -> VecArenaAPI:
+    """``num_envs`` arenas behind the ``VecArenaAPI`` from ``env`` as :func:`make_arena`
+    takes it (``"inprocess"``: the server's ``VecArena``; None: a ``VecRM`` on a private
+    vector server). The caller closes it."""
+    return open_vec_arena(env, seed, num_envs, options, "make_vec_arena")[0]
 
 
 _LENGTH_HINT = (

@@ -183,6 +183,20 @@ def seed_value(
     return int(seed)
 
 
+def check_series_seed(seed: Any, episodes: int) -> int:
+    """The seed of episode 0 of a series (Python or NumPy integer) as an int: episode ``i``
+    is reset with ``seed + i``, which must stay within 2⁶³ − 1; ``InvalidContextError``
+    naming ``seed``, ``episodes`` and the valid range otherwise."""
+    value = seed_value(seed)
+    top = max_first_seed(episodes)
+    if value > top:
+        raise InvalidContextError(
+            f"seed={value} with episodes={episodes}: episode i is reset with seed + i, which "
+            f"must stay within {MAX_SEED}; seed must be in [0, {top}]"
+        )
+    return value
+
+
 def seeds_per_arena(seed: Any, num_envs: int) -> list[int | None]:
     """A vector ``reset``'s ``seed`` as one seed (or None) per arena: None (every arena
     continues its RNG), an int (arena i gets ``seed + i``) or a sequence of ``num_envs``

@@ -5,7 +5,7 @@ takes each side as text: a bot level, or anything an installed *loader* recognis
 as a checkpoint path. A loader is registered in a package's metadata::
 
     [project.entry-points."neuronsmae.policies"]
-    qlearner = "neuronsmae.trainers.policies:load"
+    qlearner = "neuronsmae.trainers.play.policies:load"
 
 and called with the text; it returns a :class:`TeamPolicy`, or None when the text is not
 its kind (so several loaders coexist; the first that takes it wins, in name order). The

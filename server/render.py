@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -20,8 +20,25 @@ from PIL import Image, ImageDraw, ImageFont
 from neuronsmae.server.sim import field as F
 from neuronsmae.server.task import perception as P
 
-if TYPE_CHECKING:
-    from neuronsmae.server.arena import Arena
+
+class Arena(Protocol):
+    """What rendering reads of an arena (:class:`neuronsmae.server.arena.Arena` is one; the
+    arena imports this module, so this one names its shape instead of importing it)."""
+
+    config: Any
+    referee: Any
+    poses: np.ndarray
+    agents: Any
+    team: np.ndarray
+    targets: np.ndarray
+    cands: np.ndarray
+    valid: np.ndarray
+    n: int
+    n_blue: int
+    t: int
+
+    def agent_name(self, i: int) -> str: ...
+
 
 SCALE = 100
 """Pixels per metre."""

@@ -2,11 +2,12 @@
 
     python -m neuronsmae.trainers.minimal --alg vdn --episodes 200
 
-The package's trainer (:mod:`neuronsmae.trainers.train`) spreads the algorithm over Ray
+The package's trainer (:mod:`neuronsmae.trainers.run.train`) spreads the algorithm over Ray
 workers and adds what a 30-minute run needs (TD(λ) targets, derived features, a per-action
 head, symmetry augmentation, checkpoints). This file is the algorithm alone, top to bottom,
-with the package's own agent network (:mod:`~neuronsmae.trainers.agent`) and mixers
-(:mod:`~neuronsmae.trainers.mixers`):
+self-contained in the manner of CleanRL: NumPy, PyTorch and, of this package, only the
+client's factory of an in-process arena (``make_arena("inprocess")``); the networks, the
+mixers and ε-greedy are written out here.
 
 1. **Act.** One GRU network, shared by the agents, maps each agent's observation (plus its
    last action and its index) to a Q-value per action; agents act ε-greedily among the
@@ -36,18 +37,15 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional as F
 
-from neuronsmae.protocol import ArenaAPI, EnvInfo
-from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
-from neuronsmae.trainers.agent import (
-    RNNAgent,
-    build_inputs,
-    epsilon_at,
-    epsilon_greedy,
-    masked_greedy,
-)
-from neuronsmae.trainers.config import MAX_RUN_SEED, ConfigError
-from neuronsmae.trainers.mixers import make_mixer
+from neuronsmae.client import make_arena
+
+MAX_SEED = 2**32 - 1
+"""Largest run seed (NumPy's, Python's and torch's generators take it as it is)."""
+LEVELS = ("0", "1", "easy", "middle", "hard", "random", "middle_spread", "hard_flank")
+"""The bots a command line names (docs/contexts.md, "Bots"); "0" and "1" are the released
+build's levels, sent as numbers."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +56,7 @@ class Args:
     """vdn (the team's Q is the sum of the agents') or qmix (a monotonic mixing network)."""
     level: str = "easy"
     """Opponent bot: the paper's easy, middle or hard, or any other level a command line
-    takes (protocol/levels.py: random, middle_spread, hard_flank, the released 0 and 1)."""
+    takes (random, middle_spread, hard_flank, the released 0 and 1)."""
     episodes: int = 200
     """Training episodes."""
     seed: int = 1
@@ -90,8 +88,8 @@ class Args:
         """Refuse a setting outside its range, naming it and the range."""
         valid = {
             "alg": (self.alg in ("vdn", "qmix"), "vdn or qmix"),
-            "level": (self.level in LEVEL_ARGS, f"one of {', '.join(LEVEL_ARGS)}"),
-            "seed": (0 <= self.seed <= MAX_RUN_SEED, "in [0, 2³²−1]"),
+            "level": (self.level in LEVELS, f"one of {', '.join(LEVELS)}"),
+            "seed": (0 <= self.seed <= MAX_SEED, "in [0, 2³²−1]"),
             "lr": (0 < self.lr < math.inf, "a finite number > 0"),
             "gamma": (0 <= self.gamma <= 1, "in [0, 1]"),
             "eps_start": (0 <= self.eps_start <= 1, "in [0, 1]"),
@@ -105,7 +103,86 @@ class Args:
         wrong = [f"{k} must be {what}, got {getattr(self, k)!r}" for k, (ok, what) in
                  valid.items() if not ok]  # fmt: skip
         if wrong:
-            raise ConfigError("; ".join(wrong))
+            raise ValueError("; ".join(wrong))
+
+
+EVAL_SEED = 1_000_000_000
+"""Held-out seeds start here; training episodes use the seeds below it."""
+
+
+class Agent(nn.Module):
+    """The agent network shared by every agent: ``Linear → ReLU → GRU → Linear``, one
+    Q-value per action. Its input is the agent's observation, its one-hot last action and
+    its one-hot index, so the agents can still behave differently."""
+
+    def __init__(self, obs_dim: int, n_actions: int, n_agents: int, hidden: int) -> None:
+        super().__init__()
+        self.n_actions, self.n_agents, self.hidden = n_actions, n_agents, hidden
+        self.fc1 = nn.Linear(obs_dim + n_actions + n_agents, hidden)
+        self.rnn = nn.GRU(hidden, hidden, batch_first=True)
+        self.fc2 = nn.Linear(hidden, n_actions)
+
+    def inputs(self, obs: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
+        """``obs [..., n, D]`` and last actions ``[..., n]`` (−1 before the first) →
+        ``[..., n, D + A + n]``."""
+        one_hot = F.one_hot(last.clamp(min=0), self.n_actions).to(obs.dtype)
+        one_hot = one_hot * (last >= 0).unsqueeze(-1).to(obs.dtype)
+        ids = torch.eye(self.n_agents, dtype=obs.dtype).expand(*obs.shape[:-1], self.n_agents)
+        return torch.cat([obs, one_hot, ids], dim=-1)
+
+    def initial_hidden(self, batch: int) -> torch.Tensor:
+        return torch.zeros(1, batch, self.hidden)
+
+    def forward(self, x: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``x [B, T, input]``, ``h [1, B, H]`` → Q ``[B, T, A]`` and the next ``h``."""
+        out, h = self.rnn(F.relu(self.fc1(x)), h)
+        return self.fc2(out), h
+
+
+class QMixer(nn.Module):
+    """QMIX's mixer: ``Q_tot = w2ᵀ ELU(W1ᵀ q + b1) + b2``, the weights made non-negative
+    from the global state by hypernetworks, so ``Q_tot`` grows with every agent's Q."""
+
+    def __init__(self, n_agents: int, state_dim: int, embed: int = 32, hidden: int = 64) -> None:
+        super().__init__()
+        self.n, self.embed = n_agents, embed
+        self.w1 = nn.Sequential(nn.Linear(state_dim, hidden), nn.ReLU(),
+                                nn.Linear(hidden, n_agents * embed))  # fmt: skip
+        self.w2 = nn.Sequential(nn.Linear(state_dim, hidden), nn.ReLU(), nn.Linear(hidden, embed))
+        self.b1 = nn.Linear(state_dim, embed)
+        self.b2 = nn.Sequential(nn.Linear(state_dim, embed), nn.ReLU(), nn.Linear(embed, 1))
+
+    def forward(self, q: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """``q [B, T, n]``, ``state [B, T, S]`` → ``[B, T, 1]``."""
+        b, t, n = q.shape
+        s = state.reshape(b * t, -1)
+        w1 = self.w1(s).abs().view(-1, n, self.embed)
+        hidden = F.elu(torch.bmm(q.reshape(-1, 1, n), w1) + self.b1(s).view(-1, 1, self.embed))
+        w2 = self.w2(s).abs().view(-1, self.embed, 1)
+        return (torch.bmm(hidden, w2) + self.b2(s).view(-1, 1, 1)).view(b, t, 1)
+
+
+class VDNMixer(nn.Module):
+    """VDN's mixer: the team's Q is the sum of the agents' Qs."""
+
+    def forward(self, q: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        return q.sum(dim=-1, keepdim=True)
+
+
+def epsilon_greedy(
+    q: torch.Tensor, avail: torch.Tensor, epsilon: float, generator: torch.Generator
+) -> torch.Tensor:
+    """One action per agent: a uniform choice among the available ones with probability ε,
+    else the available action of highest Q. ``q``, ``avail`` ``[n, A]`` → ``[n]``."""
+    greedy = q.masked_fill(avail <= 0, float("-inf")).argmax(dim=-1)
+    random_pick = torch.multinomial(avail.to(torch.float64), 1, generator=generator)[:, 0]
+    explore = torch.rand(q.shape[0], generator=generator) < epsilon
+    return torch.where(explore, random_pick, greedy)
+
+
+def level_context(level: str) -> int | str:
+    """The ``level`` context of a command-line level: the released levels are numbers."""
+    return int(level) if level in ("0", "1") else level
 
 
 EVAL_SEED = 1_000_000_000
@@ -113,29 +190,27 @@ EVAL_SEED = 1_000_000_000
 
 
 def act(
-    agent: RNNAgent, obs: list[np.ndarray], last: torch.Tensor, hidden: torch.Tensor, n_actions: int
+    agent: Agent, obs: list[np.ndarray], last: torch.Tensor, hidden: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """One decision of every agent: Q-values ``[n, A]`` and the next hidden state."""
-    inputs = build_inputs(
-        torch.as_tensor(np.asarray(obs)), last, n_actions, last_action=True, agent_id=True
-    )
+    inputs = agent.inputs(torch.as_tensor(np.asarray(obs, np.float32)), last)
     q, hidden = agent(inputs.unsqueeze(1), hidden)  # one step for each of the n agents
     return q[:, 0], hidden
 
 
 @torch.no_grad()
 def play(
-    env: ArenaAPI,
-    agent: RNNAgent,
-    info: EnvInfo,
+    env: Any,
+    agent: Agent,
+    info: dict[str, Any],
     level: str,
     seed: int,
     epsilon: float,
     generator: torch.Generator,
 ) -> dict[str, Any]:
     """One whole episode at exploration rate ``epsilon``; its arrays and its winner."""
-    n = info.n_agents
-    obs = env.reset(contexts={"level": level_from_arg(level)}, seed=seed)
+    n = info["n_agents"]
+    obs = env.reset(contexts={"level": level_context(level)}, seed=seed)
     hidden, last = agent.initial_hidden(n), torch.full((n,), -1)
     steps: dict[str, list[Any]] = {
         "obs": [obs],
@@ -147,7 +222,7 @@ def play(
     }
     done, result = False, {}
     while not done:
-        q, hidden = act(agent, obs, last, hidden, info.n_actions)
+        q, hidden = act(agent, obs, last, hidden)
         avail = torch.as_tensor(np.asarray(steps["avail"][-1]))
         last = epsilon_greedy(q, avail, epsilon, generator)
         obs, reward, done, result = env.step(last.tolist())
@@ -180,11 +255,11 @@ def collate(episodes: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(np.stack(v)) for k, v in out.items()}
 
 
-def q_values(agent: RNNAgent, batch: dict[str, torch.Tensor], n_actions: int) -> torch.Tensor:
+def q_values(agent: Agent, batch: dict[str, torch.Tensor]) -> torch.Tensor:
     """Q-values of every agent at every step: ``[B, T+1, n, A]`` (agents folded into the
     batch so that one GRU call runs every sequence)."""
     last = torch.cat([torch.full_like(batch["actions"][:, :1], -1), batch["actions"]], dim=1)
-    inputs = build_inputs(batch["obs"], last, n_actions, last_action=True, agent_id=True)
+    inputs = agent.inputs(batch["obs"], last)
     b, t1, n, d = inputs.shape
     q, _ = agent(inputs.transpose(1, 2).reshape(b * n, t1, d), agent.initial_hidden(b * n))
     return q.view(b, n, t1, -1).transpose(1, 2)
@@ -193,11 +268,11 @@ def q_values(agent: RNNAgent, batch: dict[str, torch.Tensor], n_actions: int) ->
 class Networks(nn.Module):
     """The online agent and mixer, and their target copies."""
 
-    def __init__(self, info: EnvInfo, args: Args) -> None:
+    def __init__(self, info: dict[str, Any], args: Args) -> None:
         super().__init__()
-        width = info.obs_shape + info.n_actions + info.n_agents  # obs, last action, agent id
-        self.agent = RNNAgent(width, info.n_actions, args.hidden)
-        self.mixer = make_mixer(args.alg, info.n_agents, info.state_shape)
+        n, actions = info["n_agents"], info["n_actions"]
+        self.agent = Agent(info["obs_shape"], actions, n, args.hidden)
+        self.mixer = QMixer(n, info["state_shape"]) if args.alg == "qmix" else VDNMixer()
         self.target_agent = copy.deepcopy(self.agent)
         self.target_mixer = copy.deepcopy(self.mixer)
 
@@ -206,17 +281,16 @@ class Networks(nn.Module):
         self.target_mixer.load_state_dict(self.mixer.state_dict())
 
 
-def td_loss(
-    nets: Networks, batch: dict[str, torch.Tensor], n_actions: int, gamma: float
-) -> torch.Tensor:
+def td_loss(nets: Networks, batch: dict[str, torch.Tensor], gamma: float) -> torch.Tensor:
     """Mean squared one-step TD error of the team's value over the real steps."""
-    q = q_values(nets.agent, batch, n_actions)  # [B, T+1, n, A]
+    q = q_values(nets.agent, batch)  # [B, T+1, n, A]
     taken = q[:, :-1].gather(-1, batch["actions"].unsqueeze(-1)).squeeze(-1)  # [B, T, n]
     alive = batch["alive"]  # a destroyed robot's Q carries nothing: zero it
     q_tot = nets.mixer(taken * alive[:, :-1], batch["state"][:, :-1])  # [B, T, 1]
     with torch.no_grad():
-        best = masked_greedy(q[:, 1:], batch["avail"][:, 1:])  # double Q: online picks...
-        target_q = q_values(nets.target_agent, batch, n_actions)[:, 1:]  # ...target values
+        masked = q[:, 1:].masked_fill(batch["avail"][:, 1:] <= 0, float("-inf"))
+        best = masked.argmax(dim=-1)  # double Q: the online network picks...
+        target_q = q_values(nets.target_agent, batch)[:, 1:]  # ...the target network values
         next_q = target_q.gather(-1, best.unsqueeze(-1)).squeeze(-1) * alive[:, 1:]
         next_tot = nets.target_mixer(next_q, batch["state"][:, 1:])  # [B, T, 1]
         # The episode's last real step ends it: no bootstrap past it.
@@ -227,16 +301,14 @@ def td_loss(
     return (((q_tot - target) * filled) ** 2).sum() / filled.sum()
 
 
-def train(args: Args, env: ArenaAPI | None = None) -> dict[str, Any]:
+def train(args: Args, env: Any = None) -> dict[str, Any]:
     """Train for ``args.episodes`` episodes, then play greedily on held-out seeds.
 
     Returns the networks, the loss of every update and the greedy win rate.
     """
     own = env is None
-    if env is None:
-        from neuronsmae.server import Arena  # the in-process arena
-
-        env = Arena(seed=args.seed, action_space="abstract")
+    if env is None:  # the in-process arena, through the client's factory
+        env = make_arena("inprocess", seed=args.seed, action_space="abstract")
     try:
         return _train(args, env)
     finally:
@@ -244,12 +316,12 @@ def train(args: Args, env: ArenaAPI | None = None) -> dict[str, Any]:
             env.close()
 
 
-def _train(args: Args, env: ArenaAPI) -> dict[str, Any]:
+def _train(args: Args, env: Any) -> dict[str, Any]:
     """:func:`train` on an open arena."""
     random.seed(args.seed)
     torch.manual_seed(args.seed)
     generator = torch.Generator().manual_seed(args.seed)
-    info = EnvInfo.from_dict(env.get_env_info())
+    info = env.get_env_info()
     nets = Networks(info, args)
     params = [*nets.agent.parameters(), *nets.mixer.parameters()]
     optimizer = torch.optim.Adam(params, lr=args.lr)
@@ -258,14 +330,14 @@ def _train(args: Args, env: ArenaAPI) -> dict[str, Any]:
     losses: list[float] = []
     wins: deque[bool] = deque(maxlen=50)
     for k in range(args.episodes):
-        epsilon = epsilon_at(k, args.eps_start, args.eps_end, args.eps_anneal)
+        epsilon = args.eps_start + min(k / args.eps_anneal, 1.0) * (args.eps_end - args.eps_start)
         start = (args.seed * 100_003 + k) % EVAL_SEED  # never a held-out seed
         episode = play(env, nets.agent, info, args.level, start, epsilon, generator)
         replay.append(episode)
         wins.append(episode["winner"] == "blue")
         if len(replay) >= args.batch_size:
             picked = rng.choice(len(replay), size=args.batch_size, replace=False)
-            loss = td_loss(nets, collate([replay[i] for i in picked]), info.n_actions, args.gamma)
+            loss = td_loss(nets, collate([replay[i] for i in picked]), args.gamma)
             optimizer.zero_grad()
             loss.backward()
             nn.utils.clip_grad_norm_(params, args.grad_clip)
@@ -298,7 +370,7 @@ def parse_args(argv: list[str] | None = None) -> Args:
         )
     try:
         return Args(**vars(parser.parse_args(argv)))
-    except ConfigError as exc:
+    except ValueError as exc:
         parser.error(str(exc))
 
 

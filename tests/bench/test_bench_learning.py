@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from bench import bench_learning
-from neuronsmae.trainers.config import TrainConfig
-from neuronsmae.trainers.interrupt import TrainingInterrupted
+from neuronsmae.trainers.run.config import TrainConfig
+from neuronsmae.trainers.run.interrupt import TrainingInterrupted
 
 
 @pytest.fixture

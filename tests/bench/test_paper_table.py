@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bench.paper_table import main
-from neuronsmae.trainers.config import make_config, preset
-from neuronsmae.trainers.train import train
+from neuronsmae.trainers.run.config import make_config, preset
+from neuronsmae.trainers.run.train import train
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow, pytest.mark.usefixtures("local_ray")]
 

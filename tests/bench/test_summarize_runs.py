@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from bench.summarize_runs import main, summarize
-from neuronsmae.trainers.records import EVAL_COLUMNS, TRAIN_COLUMNS
+from neuronsmae.trainers.run.records import EVAL_COLUMNS, TRAIN_COLUMNS
 
 
 def _write(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:

@@ -13,7 +13,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from neuronsmae.trainers.checkpoint import FORMAT, CheckpointError, load_checkpoint  # noqa: E402
+from neuronsmae.trainers.core.checkpoint import FORMAT, CheckpointError, load_checkpoint  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -79,7 +79,7 @@ def test_a_file_that_is_no_checkpoint_is_a_checkpoint_error_naming_it(
 def test_the_command_lines_report_a_bad_checkpoint_without_a_traceback(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from neuronsmae.trainers import match
+    from neuronsmae.trainers.play import match
 
     bad = tmp_path / "checkpoint.pt"
     bad.write_bytes(b"garbage")

@@ -14,10 +14,11 @@ import torch
 
 from neuronsmae.protocol import EnvInfo
 from neuronsmae.server import Arena
-from neuronsmae.trainers.checkpoint import Counters, save_checkpoint
-from neuronsmae.trainers.config import make_config
-from neuronsmae.trainers.learner import EnvSpec, agent_spec
-from neuronsmae.trainers.task import blue_view, resolve_learner
+from neuronsmae.trainers.core.checkpoint import Counters, save_checkpoint
+from neuronsmae.trainers.core.learner import EnvSpec, agent_spec
+from neuronsmae.trainers.play.task import blue_view
+from neuronsmae.trainers.run.config import make_config
+from neuronsmae.trainers.run.config_groups import resolve_learner
 
 
 def make_checkpoint(path: Path, seed: int, **arena: Any) -> Path:

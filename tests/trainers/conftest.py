@@ -10,7 +10,7 @@ import pytest
 import ray
 from ray._private import ray_constants
 
-from neuronsmae.trainers.buffer import Episode
+from neuronsmae.trainers.core.buffer import Episode
 
 N_AGENTS, OBS, STATE, ACTIONS, LIMIT = 2, 5, 4, 3, 6
 TINY_LEARNER = {

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from neuronsmae.protocol import EnvInfo
 from neuronsmae.server import Arena
 from neuronsmae.trainers.minimal import Args, Networks, collate, parse_args, play, train
 
@@ -19,7 +18,7 @@ def test_a_few_episodes_train_the_networks(alg: str) -> None:
     arena = Arena(seed=0, action_space="abstract")
     try:
         torch.manual_seed(args.seed)  # what train() starts from
-        before = Networks(EnvInfo.from_dict(arena.get_env_info()), args).state_dict()
+        before = Networks(arena.get_env_info(), args).state_dict()
         result = train(args, arena)
     finally:
         arena.close()
@@ -37,7 +36,7 @@ def test_a_few_episodes_train_the_networks(alg: str) -> None:
 def test_episodes_pad_to_the_longest_with_masks() -> None:
     arena = Arena(seed=0, action_space="abstract")
     try:
-        info = EnvInfo.from_dict(arena.get_env_info())
+        info = arena.get_env_info()
         nets = Networks(info, Args(hidden=8))
         generator = torch.Generator().manual_seed(0)
         episode = play(arena, nets.agent, info, "easy", 3, 1.0, generator)
@@ -47,7 +46,7 @@ def test_episodes_pad_to_the_longest_with_masks() -> None:
     short = {**short, **{k: episode[k][:2] for k in ("actions", "reward")}}
     batch = collate([episode, short])
     t = len(episode["reward"])
-    assert batch["obs"].shape == (2, t + 1, 2, info.obs_shape)
+    assert batch["obs"].shape == (2, t + 1, 2, info["obs_shape"])
     assert batch["filled"][0].sum() == t and batch["filled"][1].tolist() == [1, 1] + [0] * (t - 2)
     assert bool((batch["avail"][1, 3:] == 1).all())  # padding allows every action
 
