@@ -6,9 +6,8 @@ map) and what SMAC-style code expects. :class:`EnvInfo` is that dict parsed once
 implies: which columns of an observation hold which robot's pose, which candidate point,
 the time, HP, bullets and LiDAR (:class:`ObsLayout`), and the same for the global state
 (:class:`StateLayout`). Clients and trainers read positions from it instead of writing
-column numbers down, so the layout is written in one place (the server builds its
-observations to the same formula, ``server/task/observations.py``, and the arena checks
-the two agree every time it describes itself).
+column numbers down, so the layout is written in one place: here (the server sizes and
+fills its observations from :class:`ObsLayout` too, ``server/task/observations.py``).
 
 The observation of an agent whose team has ``a`` robots (itself included) facing ``e``
 enemies, every value in [−1, 1] (``docs/options.md``, ``docs/reference.md``)::

@@ -32,8 +32,9 @@ PROTOCOL_VERSION = 2
 """The version this code speaks: 2 added the vector messages (``vreset``, ``vstep``,
 ``vget``) and the ``arenas`` fields. Bumped on any incompatible change."""
 SUPPORTED_VERSIONS = (1, 2)
-"""Versions a server answers. Version 1 is version 2 without the vector messages and the
-``arenas`` fields, so a version-1 client keeps working against a one-arena server."""
+"""Versions a server answers. Version 1 is version 2 without the vector messages, the
+``arenas`` fields and ``ping``'s ``pid``, so a version-1 client keeps working against a
+one-arena server: its replies speak version 1 (:func:`reply_in_version`)."""
 MAX_REQUEST_BYTES = 1 << 20
 """Largest request a server decodes (1 MiB); requests carry actions and options, never
 images, so anything bigger is a mistake or an attack."""
@@ -282,10 +283,11 @@ ENVELOPE = ("v", "type", "session")
 
 @dataclass(frozen=True)
 class Request:
-    """A decoded request: which session sent which message."""
+    """A decoded request: which session sent which message, in which protocol version."""
 
     body: Message
     session: str = ""
+    version: int = PROTOCOL_VERSION
 
 
 @dataclass(frozen=True)
@@ -357,7 +359,7 @@ def decode_request(data: bytes | bytearray | memoryview) -> Request:
         raise VersionMismatchError(
             f"{cls.TYPE!r} with these fields is protocol version 2; the request says v=1"
         )
-    return Request(body=body, session=session)
+    return Request(body=body, session=session, version=version)
 
 
 def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:
@@ -375,6 +377,20 @@ def _body(cls: type[Message], wire: dict[Any, Any]) -> Message:
 
 
 # ---- replies -------------------------------------------------------------------------------
+
+ADDED_IN_2: dict[type[Message], tuple[str, ...]] = {Configure: ("arenas",), Ping: ("arenas", "pid")}
+"""Reply fields that version 2 added, per request type: a version-1 reply goes without them."""
+
+
+def reply_in_version(kind: type[Message], value: Any, version: int) -> Any:
+    """``value``, a reply to a ``kind`` request, as protocol ``version`` has it: the replies
+    that carry a ``version`` field (``configure``, ``ping``) carry the request's, and a
+    version-1 reply leaves out the fields of :data:`ADDED_IN_2`, so a version-1 client gets
+    exactly what a version-1 server sent."""
+    if version >= PROTOCOL_VERSION or kind not in ADDED_IN_2 or not isinstance(value, dict):
+        return value
+    added = ADDED_IN_2[kind]
+    return {**{k: v for k, v in value.items() if k not in added}, "version": version}
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,8 @@ directly where they would use a ``VecRM``.
 
 A request is checked for every arena before any arena moves, so one arena's bad action or
 context refuses the whole request and changes nothing. Errors keep their type and name the
-arena: ``InvalidActionError("arena 3: agent 1: action 9 is out of range; valid: [0, 7]")``.
+arena, however many there are (``arena 0`` of one too):
+``InvalidActionError("arena 3: agent 1: action 9 is out of range; valid: [0, 7]")``.
 """
 
 from __future__ import annotations
@@ -42,15 +43,29 @@ ContextsArg = Mapping[str, Any] | Sequence[Mapping[str, Any] | None] | None
 
 
 @contextmanager
-def _in_arena(i: int, k: int) -> Iterator[None]:
+def _in_arena(i: int) -> Iterator[None]:
     """Re-raise arena ``i``'s typed error as the same type, its message prefixed with the
-    arena when there are several (``k`` > 1)."""
+    arena; the arena's own error is its ``__cause__`` (see :func:`as_the_arena`)."""
     try:
         yield
     except NeuronsMAEError as exc:
-        if k == 1:
-            raise
         raise type(exc)(f"arena {i}: {exc}") from exc
+
+
+@contextmanager
+def as_the_arena() -> Iterator[None]:
+    """Re-raise an error that names one arena as that arena's own (without ``arena i:``).
+
+    A one-arena server's ``reset`` and ``step`` go through its ``VecArena`` but answer as
+    ``Arena.reset`` and ``Arena.step`` do in process; its ``vreset`` and ``vstep`` name
+    arena 0, as every vector message names the arena."""
+    try:
+        yield
+    except NeuronsMAEError as exc:
+        own = exc.__cause__
+        if type(own) is type(exc):
+            raise own from None
+        raise
 
 
 @inherit_docstrings
@@ -131,7 +146,7 @@ class VecArena(VecArenaAPI):
             if contexts[i] is not None or seeds[i] is not None:  # given for any arena: checked
                 self._check_reset(i, contexts[i], seeds[i])
             if on[i] and not resetting[i]:
-                with _in_arena(i, self.num_envs):
+                with _in_arena(i):
                     checked[i] = self.arenas[i].check_actions(rows[i])
         rewards = np.zeros(self._obs.shape[:2], dtype=np.float64)
         dones = np.zeros(k, dtype=bool)
@@ -179,7 +194,7 @@ class VecArena(VecArenaAPI):
             raise ResetNeededError(f"{what} needs an episode: call reset() first")
 
     def _check_reset(self, i: int, contexts: Mapping[str, Any] | None, seed: Any) -> None:
-        with _in_arena(i, self.num_envs):
+        with _in_arena(i):
             parse_contexts(contexts)
             if seed is not None:
                 check_seed(seed)

@@ -1,9 +1,12 @@
-"""``neuronsmae-serve``: start N arena servers on consecutive ports and keep them up.
+"""``neuronsmae-fleet``: start N arena servers on consecutive ports and keep them up.
 
-    neuronsmae-serve --base-port 10000 --count 8 --seed 1 [--arenas 1] [--host 127.0.0.1]
+    neuronsmae-fleet --base-port 10000 --count 8 --seed 1 [--arenas 1] [--host 127.0.0.1]
                      [--time-scale 100] [--router tcp/10.0.0.1:7447] [--interval 2]
-    neuronsmae-serve status --base-port 10000 --count 8 [--json]
+    neuronsmae-fleet status --base-port 10000 --count 8 [--json]
     python -m neuronsmae.server.serving.fleet ...   (the same, without the console script)
+
+``neuronsmae-serve``, the command's former name, still runs it after a one-line
+deprecation note on stderr (:func:`deprecated_main`); it will be removed.
 
 Server ``i`` listens on ``base_port + i`` and holds ``--arenas`` arenas (1 by default) seeded
 ``seed + i * arenas`` onward, as a subprocess of its own
@@ -48,6 +51,11 @@ from neuronsmae.server.serving.supervisor import (
 )
 
 log = logging.getLogger("neuronsmae.serve")
+
+COMMAND = "neuronsmae-fleet"
+"""The fleet's command (one server alone is ``neuronsmae-server``)."""
+OLD_COMMAND = "neuronsmae-serve"
+"""The fleet command's former name, a deprecated alias of :data:`COMMAND`."""
 
 # ---- status --------------------------------------------------------------------------------
 
@@ -126,9 +134,10 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def _run_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="neuronsmae-serve",
-        description="Run N NeuronsMAE servers on consecutive ports and restart any that die.",
-        epilog="`neuronsmae-serve status --base-port P --count N` lists their health.",
+        prog=COMMAND,
+        description="Run N NeuronsMAE servers on consecutive ports and restart any that die "
+        "(one server alone: neuronsmae-server).",
+        epilog=f"`{COMMAND} status --base-port P --count N` lists their health.",
     )
     _common(p)
     p.add_argument(
@@ -163,7 +172,7 @@ def _run_parser() -> argparse.ArgumentParser:
 
 def _status_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="neuronsmae-serve status", description="Ping the servers of a fleet."
+        prog=f"{COMMAND} status", description="Ping the servers of a fleet."
     )
     _common(p)
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -188,14 +197,22 @@ def _spec(args: argparse.Namespace, **extra: object) -> FleetSpec:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``neuronsmae-serve`` (``run`` is the default subcommand)."""
+    """Entry point of ``neuronsmae-fleet`` (``run`` is the default subcommand)."""
     args_in = list(sys.argv[1:] if argv is None else argv)
-    logging.basicConfig(
-        stream=sys.stderr, level=logging.INFO, format="neuronsmae-serve: %(message)s"
-    )
+    logging.basicConfig(stream=sys.stderr, level=logging.INFO, format=f"{COMMAND}: %(message)s")
     if args_in[:1] == ["status"]:
         return _status_main(args_in[1:])
     return _run_main(args_in[1:] if args_in[:1] == ["run"] else args_in)
+
+
+def deprecated_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``neuronsmae-serve``, the former name: one line on stderr saying to use
+    ``neuronsmae-fleet``, then exactly what ``neuronsmae-fleet`` does."""
+    sys.stderr.write(
+        f"{OLD_COMMAND} is deprecated and will be removed: use {COMMAND} (the same command)\n"
+    )
+    sys.stderr.flush()
+    return main(argv)
 
 
 def _status_main(argv: list[str]) -> int:

@@ -14,8 +14,12 @@ rules below can be tested without a network:
   or when they have run episodes for another session: so ``RM(seed=s)`` replays exactly
   what ``Arena(seed=s)`` would, however the server was used before.
 * The one-arena messages (``reset``, ``step``, ``get``, ``render``) serve a one-arena
-  server; the vector messages (``vreset``, ``vstep``, ``vget``) serve any. Every change of
-  state goes through the ``VecArena``, so the two kinds may be mixed on a one-arena server.
+  server and answer as ``Arena`` does in process (errors without an arena index); the
+  vector messages (``vreset``, ``vstep``, ``vget``) serve any and name the arena in their
+  errors (``arena 0`` of one). Every change of state goes through the ``VecArena``, so the
+  two kinds may be mixed on a one-arena server: they play the same episode, and an episode
+  that ends at either is over for both (``step`` then needs a reset; ``vstep`` autoresets).
+* A reply speaks the request's protocol version (``reply_in_version``).
 * ``step`` and ``vstep`` are paced to at most ``time_scale`` times real time (0 = unlimited).
 """
 
@@ -64,9 +68,10 @@ from neuronsmae.protocol.messages import (
     decode_request,
     encode_reply,
     max_first_seed,
+    reply_in_version,
 )
 from neuronsmae.server.config import ArenaConfig
-from neuronsmae.server.vec import VecArena
+from neuronsmae.server.vec import VecArena, as_the_arena
 
 log = logging.getLogger("neuronsmae.server")
 
@@ -252,7 +257,8 @@ class ArenaService:
             self._check_owner(request.session)
         if type(body) in ONE_ARENA and self.arenas != 1:
             raise MalformedMessageError(one_arena_only(body.TYPE, self.arenas))
-        return self._handlers[type(body)](body, request.session)
+        value = self._handlers[type(body)](body, request.session)
+        return reply_in_version(type(body), value, request.version)
 
     def _check_owner(self, session: str) -> None:
         if self._owner is None:
@@ -360,7 +366,8 @@ class ArenaService:
     def _reset(self, body: Reset, session: str) -> Any:
         assert self._built is not None
         self._built.used = True
-        self._vec.reset(body.contexts, None if body.seed is None else [body.seed])
+        with as_the_arena():
+            self._vec.reset(body.contexts, None if body.seed is None else [body.seed])
         return self._arena.get_obs()
 
     def _step(self, body: Step, session: str) -> Any:
@@ -368,7 +375,8 @@ class ArenaService:
         if arena.done:  # one-arena semantics: no autoreset
             arena.step(body.actions)  # raises ResetNeededError, exactly as in process
         self._pacer.wait()
-        _, rewards, dones, infos = vec.step([body.actions])
+        with as_the_arena():
+            _, rewards, dones, infos = vec.step([body.actions])
         return [arena.get_obs(), rewards[0].tolist(), bool(dones[0]), infos[0]]
 
     def _get(self, body: Get, session: str) -> Any:

@@ -1,8 +1,9 @@
-"""The fleet's state file: which pids serve which ports, for ``neuronsmae-serve status``.
+"""The fleet's state file: which pids serve which ports, for ``neuronsmae-fleet status``.
 
 One file per base port, ``$NEURONSMAE_STATE_DIR/neuronsmae-serve-<base>.json`` (the system's
-temp folder when the variable is unset or empty). The variable must name an existing folder:
-it is not created, so a mistyped path is refused before any server starts instead of
+temp folder when the variable is unset or empty; the name keeps the command's former name, so
+``status`` still finds a fleet started before the rename). The variable must name an existing
+folder: it is not created, so a mistyped path is refused before any server starts instead of
 scattering state where ``status`` will never look.
 
 A fleet writes the file only once it has *claimed* it (:meth:`StateFile.claim`), which it

@@ -1,6 +1,6 @@
 """The fleet supervisor: N server subprocesses on consecutive ports, pinged and restarted.
 
-Kept apart from the ``neuronsmae-serve`` command line (:mod:`neuronsmae.server.serving.fleet`) so a
+Kept apart from the ``neuronsmae-fleet`` command line (:mod:`neuronsmae.server.serving.fleet`) so a
 test or another launcher can drive :class:`Fleet` directly: ``start`` brings the servers
 up, ``check`` is one supervision pass (restart what died, ping what runs), ``stop`` ends
 them all. Servers are fresh interpreters (``python -m neuronsmae.server``), never forks,

@@ -1,15 +1,12 @@
-"""Observation vectors, the global state and their layouts.
+"""Observation vectors, the global state and their normalisation.
 
-Vector layout for a robot with ``a`` team-mates (itself first) and ``e`` enemies, every value
-in [-1, 1] (``docs/options.md`` has the table):
-
-    [poses 3·(a+e)] [candidate points 2·k·e, optional] [time 1] [HP a+e] [bullets a+e]
-    [LiDAR 61, optional]
-
-Poses are (x, y, yaw) of self, allies in index order, then enemies in index order. For 2 v 2
-with abstract actions and k = 4 this is the released 37-value layout; without candidate
-points it is the released 21-value one. Under partial observability an enemy outside the
-camera's view or sight has its pose and candidate points replaced by ``unseen_value``.
+The layout of one observation is written once, in the protocol
+(:class:`neuronsmae.protocol.env_info.ObsLayout`, which clients and trainers read too;
+docs/options.md has the table): :func:`obs_size` is that layout's size, and the kernels
+below fill its blocks in its order. For 2 v 2 with abstract actions and k = 4 it is the
+released 37-value layout; without candidate points the released 21-value one. Under
+partial observability an enemy outside the camera's view or sight has its pose and
+candidate points replaced by ``unseen_value``.
 """
 
 from __future__ import annotations
@@ -19,6 +16,7 @@ import math
 import numba
 import numpy as np
 
+from neuronsmae.protocol.env_info import ObsLayout
 from neuronsmae.server.sim import field as F
 
 LIDAR_OFFSET = 61
@@ -26,10 +24,9 @@ HALF_X, HALF_Y = F.FIELD_X / 2.0, F.FIELD_Y / 2.0
 
 
 def obs_size(n_team: int, n_enemy: int, k: int, candidates: bool, vector: bool, lidar: bool) -> int:
-    """Length of one observation: the formula of the module docstring."""
-    n = n_team + n_enemy
-    size = (3 * n + (2 * k * n_enemy if candidates else 0) + 1 + 2 * n) if vector else 0
-    return size + (F.LIDAR_BEAMS if lidar else 0)
+    """Length of one observation: the protocol's :class:`ObsLayout` of these blocks."""
+    beams = F.LIDAR_BEAMS if lidar else 0
+    return ObsLayout(n_team, n_enemy, k if candidates else 0, vector, beams).size
 
 
 def state_size(n_robots: int) -> int:

@@ -1,13 +1,15 @@
-"""``neuronsmae-serve``: start N servers, report them, restart a killed one, stop on SIGTERM."""
+"""``neuronsmae-fleet``: start N servers, report them, restart a killed one, stop on SIGTERM."""
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 from collections.abc import Callable
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import pytest
@@ -42,7 +44,7 @@ def test_serve_restarts_a_killed_server_and_stops_on_sigterm(spawn: Spawn, tmp_p
     fleet = spawn("-m", "neuronsmae.server.serving.fleet", *args, name="fleet")
 
     def all_up() -> bool:
-        assert fleet.poll() is None, "neuronsmae-serve exited"
+        assert fleet.poll() is None, "neuronsmae-fleet exited"
         return all(r["state"] == "up" and r["pid"] for r in _status(base, 2, state))
 
     wait_for(all_up, 240, "both servers")
@@ -206,3 +208,40 @@ def test_bad_supervision_settings_are_refused_before_any_server_starts(
     assert not state.exists()  # nothing was started
     with pytest.raises(FleetStartError, match="cannot be a folder for the servers' logs"):
         Fleet(FleetSpec(base_port=free_ports()), a_file).__enter__()
+
+
+def _script(name: str) -> str:
+    """The installed console script ``name`` (beside this Python first)."""
+    found = shutil.which(name, path=str(Path(sys.executable).parent)) or shutil.which(name)
+    if found is None:
+        pytest.fail(f"no {name} script: run `pip install -e . --no-deps`")
+    return found
+
+
+def test_the_fleet_command_is_neuronsmae_fleet_and_neuronsmae_serve_its_deprecated_alias() -> None:
+    scripts = {e.name: e.value for e in entry_points(group="console_scripts")}
+    assert scripts["neuronsmae-fleet"] == "neuronsmae.server.serving.fleet:main"
+    assert scripts["neuronsmae-serve"] == "neuronsmae.server.serving.fleet:deprecated_main"
+    assert scripts["neuronsmae-server"] == "neuronsmae.server.serving.cli:main"
+
+
+@pytest.mark.slow
+def test_both_fleet_names_run_and_only_the_old_one_warns(tmp_path: Path) -> None:
+    base = free_ports()
+    status = ["status", "--base-port", str(base), "--ping-timeout", "0.5", "--json"]
+    status += ["--state-file", str(tmp_path / "state.json")]
+    for name in ("neuronsmae-fleet", "neuronsmae-serve"):
+        shown = subprocess.run([_script(name), "--help"], capture_output=True, text=True)
+        assert shown.returncode == 0 and shown.stdout.startswith("usage: neuronsmae-fleet ")
+        ran = subprocess.run([_script(name), *status], capture_output=True, text=True)
+        assert ran.returncode == 1, ran.stderr  # nothing listens there: down, exit 1
+        assert [r["state"] for r in json.loads(ran.stdout)] == ["down"]
+        for out in (shown, ran):
+            notes = [line for line in out.stderr.splitlines() if "deprecated" in line]
+            if name == "neuronsmae-fleet":
+                assert notes == [], out.stderr
+            else:
+                assert notes == [
+                    "neuronsmae-serve is deprecated and will be removed: use neuronsmae-fleet "
+                    "(the same command)"
+                ]

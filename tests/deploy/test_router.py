@@ -98,9 +98,9 @@ def test_training_samples_through_the_router(spawn: Spawn, tmp_path: Path) -> No
     """``cluster.router``: every worker reaches its server ``base_port + i`` through the
     router alone (the trainer used to fail at start with a TypeError for any router)."""
     pytest.importorskip("ray")
-    from neuronsmae.trainers.config import make_config
-    from neuronsmae.trainers.placement import sampler_placement
-    from neuronsmae.trainers.train import train
+    from neuronsmae.trainers.run.config import make_config
+    from neuronsmae.trainers.run.placement import sampler_placement
+    from neuronsmae.trainers.run.train import train
 
     r_port = free_ports(3)  # one block: two picks could meet
     base = r_port + 1

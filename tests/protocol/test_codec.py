@@ -42,6 +42,7 @@ from neuronsmae.protocol.messages import (
     decode_request,
     encode_reply,
     encode_request,
+    reply_in_version,
 )
 
 LIMIT = 1 << 16
@@ -363,6 +364,28 @@ def test_version_1_requests_are_still_answered() -> None:
     wire = {"v": 1, "type": "step", "session": "s", "actions": [1]}
     request = decode_request(msgpack.packb(wire))
     assert isinstance(request.body, Step) and request.body.actions == [1]
+    assert request.version == 1
+    assert decode_request(encode_request(Ping())).version == PROTOCOL_VERSION
+
+
+def test_a_reply_speaks_its_requests_version() -> None:
+    """protocol/README.md: version-1 ``configure`` and ``ping`` replies carry ``version: 1``
+    and none of version 2's fields; other replies are the same in both versions."""
+    ping = {"version": 2, "server": "s", "owned": False, "time_scale": 0.0, "arenas": 1, "pid": 7}
+    assert reply_in_version(Ping, ping, 1) == {
+        "version": 1,
+        "server": "s",
+        "owned": False,
+        "time_scale": 0.0,
+    }
+    configured = {"version": 2, "server": "s", "rebuilt": True, "arenas": 1}
+    assert reply_in_version(Configure, configured, 1) == {
+        "version": 1,
+        "server": "s",
+        "rebuilt": True,
+    }
+    assert reply_in_version(Ping, ping, 2) is ping
+    assert reply_in_version(Get, {"version": 9}, 1) == {"version": 9}  # an env_info map: as is
 
 
 def test_oversized_request() -> None:
