@@ -19,6 +19,7 @@ import uuid
 import weakref
 from collections.abc import Callable
 
+from neuronsmae.protocol.defaults import DEFAULT_HOST
 from neuronsmae.protocol.errors import (
     InvalidOptionError,
     MalformedMessageError,
@@ -120,7 +121,7 @@ class Connection:
         port: int | None,
         command: Callable[[int], ServerCommand],
         configure: Configure,
-        host: str = "127.0.0.1",
+        host: str = DEFAULT_HOST,
         router: str | None = None,
         launch: bool = True,
         timeout: float = 10.0,

@@ -15,6 +15,12 @@ import numpy as np
 from neuronsmae.client.connection import Connection
 from neuronsmae.client.connection import answering_pid as pid_on_link
 from neuronsmae.protocol.actions import check_sequence, is_sequence
+from neuronsmae.protocol.defaults import (
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    DEFAULT_SEED,
+    RELEASED_TIME_SCALE,
+)
 from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
@@ -82,11 +88,11 @@ class RM(ArenaAPI):
 
     def __init__(
         self,
-        seed: int = 1234,
+        seed: int = DEFAULT_SEED,
         port: int | None = None,
         no_graphics: bool = True,
-        time_scale: float = 100,
-        host: str = "127.0.0.1",
+        time_scale: float = RELEASED_TIME_SCALE,
+        host: str = DEFAULT_HOST,
         launch: bool = True,
         timeout: float = 10.0,
         router: str | None = None,
@@ -215,14 +221,16 @@ def _query(body: Message, port: int, host: str, timeout: float) -> Any:
     return reply.value
 
 
-def ping(port: int = 10000, host: str = "127.0.0.1", timeout: float = 2.0) -> dict[str, Any]:
+def ping(
+    port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, timeout: float = 2.0
+) -> dict[str, Any]:
     """Ask the server on ``host:port`` who it is: protocol ``version``, ``server`` id,
     whether it is ``owned`` by a client, its ``time_scale`` and how many ``arenas`` it
     holds, and its ``pid``. Raises ServerUnavailableError."""
     return _query(Ping(), port, host, timeout)
 
 
-def answering_pid(port: int, host: str = "127.0.0.1", timeout: float = 1.0) -> int | None:
+def answering_pid(port: int, host: str = DEFAULT_HOST, timeout: float = 1.0) -> int | None:
     """The pid of the server answering a ping on ``host:port``, None while none answers:
     a launcher waits for its own server's pid, since another may hold a port it picked."""
     link = Link(host, port)
@@ -233,7 +241,7 @@ def answering_pid(port: int, host: str = "127.0.0.1", timeout: float = 1.0) -> i
 
 
 def context_table(
-    port: int = 10000, host: str = "127.0.0.1", timeout: float = 2.0
+    port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, timeout: float = 2.0
 ) -> list[dict[str, Any]]:
     """The server's reset contexts: one row per key with its default and range or choices."""
     return _query(Contexts(), port, host, timeout)

@@ -28,6 +28,7 @@ import numpy as np
 
 from neuronsmae.client.connection import Call, Connection
 from neuronsmae.protocol.actions import check_joint, used_agents
+from neuronsmae.protocol.defaults import DEFAULT_HOST, DEFAULT_SEED, UNPACED
 from neuronsmae.protocol.errors import (
     InvalidActionError,
     InvalidContextError,
@@ -89,14 +90,14 @@ class VecRM(VecArenaAPI):
 
     def __init__(
         self,
-        seed: int = 1234,
+        seed: int = DEFAULT_SEED,
         port: int | Sequence[int] | None = None,
         num_envs: int = 1,
         *,
         servers: int = 1,
         no_graphics: bool = True,
-        time_scale: float = 0.0,
-        host: str = "127.0.0.1",
+        time_scale: float = UNPACED,
+        host: str = DEFAULT_HOST,
         launch: bool = True,
         timeout: float = 10.0,
         router: str | None = None,

@@ -28,6 +28,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from neuronsmae.protocol.defaults import DEFAULT_HOST, DEFAULT_SEED, UNPACED
 from neuronsmae.protocol.errors import InvalidOptionError, ServerUnavailableError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, check_tls
@@ -50,7 +51,7 @@ def is_local(host: str) -> bool:
         return False
 
 
-def free_port(host: str = "127.0.0.1") -> int:
+def free_port(host: str = DEFAULT_HOST) -> int:
     """A TCP port nothing listens on right now (the kernel's pick; it may be taken again
     before a server binds it, which the server reports by exiting with status 2)."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -89,13 +90,13 @@ class ServerCommand:
 
     port: int
     """TCP port to listen on (``--port``); its key is ``neuronsmae/<port>/rpc``."""
-    seed: int = 1234
+    seed: int = DEFAULT_SEED
     """Seed of arena 0 until a client configures its own; arena i gets ``seed + i``."""
-    host: str = "127.0.0.1"
+    host: str = DEFAULT_HOST
     """Address to listen on (``--host``)."""
     arenas: int = 1
     """Arenas this server holds, stepped together by one vector request (``--arenas``)."""
-    time_scale: float = 0.0
+    time_scale: float = UNPACED
     """Cap on simulated/real time per request (``--time-scale``; 0 = unlimited)."""
     busy_poll_us: float = 0.0
     """Microseconds to poll for the next request before sleeping (``--busy-poll``)."""
@@ -226,7 +227,7 @@ class ServerProcess:
 def launch_private(
     make: Callable[[int], ServerCommand],
     ready: Callable[[int], int | None],
-    host: str = "127.0.0.1",
+    host: str = DEFAULT_HOST,
     attempts: int = 5,
     timeout: float = STARTUP_TIMEOUT,
 ) -> ServerProcess:

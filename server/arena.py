@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.actions import used_agents
+from neuronsmae.protocol.defaults import DEFAULT_SEED
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import ClosedError, InvalidOptionError, ResetNeededError
 from neuronsmae.protocol.interface import ArenaAPI, inherit_docstrings
@@ -55,7 +56,7 @@ class Arena(ArenaAPI):
     PyBullet client, so several arenas in one process never interfere.
     """
 
-    def __init__(self, seed: int = 1234, **options: Any) -> None:
+    def __init__(self, seed: int = DEFAULT_SEED, **options: Any) -> None:
         self.seed = check_seed(seed, InvalidOptionError)
         self.config = cfg = ArenaConfig.from_options(options)
         self.rng = np.random.default_rng(self.seed)

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from neuronsmae.protocol.defaults import DEFAULT_SEED
 from neuronsmae.protocol.errors import (
     ClosedError,
     InvalidActionError,
@@ -83,7 +84,7 @@ class VecArena(VecArenaAPI):
 
     def __init__(
         self,
-        seed: int = 1234,
+        seed: int = DEFAULT_SEED,
         num_envs: int = 1,
         *,
         factory: Callable[..., Arena] = Arena,

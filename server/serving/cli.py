@@ -23,6 +23,12 @@ from collections.abc import Sequence
 
 import zenoh
 
+from neuronsmae.protocol.defaults import (
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    DEFAULT_SEED,
+    RELEASED_TIME_SCALE,
+)
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.messages import MAX_ARENAS, max_first_seed
 from neuronsmae.protocol.transport import MAX_BUSY_POLL_US, zenoh_message
@@ -48,11 +54,13 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="neuronsmae-server", description="Serve NeuronsMAE arenas over Zenoh on one port."
     )
-    p.add_argument("--port", type=int, default=10000, help="TCP port to listen on (10000)")
+    p.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help=f"TCP port to listen on ({DEFAULT_PORT})"
+    )
     p.add_argument(
         "--seed",
         type=int,
-        default=1234,
+        default=DEFAULT_SEED,
         help="arena seed used until a client configures its own (1234)",
     )
     p.add_argument(
@@ -65,8 +73,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--time-scale",
         type=float,
-        default=100.0,
-        help="cap on simulated/real time ratio; 0 = unlimited (100)",
+        default=RELEASED_TIME_SCALE,
+        help=f"cap on simulated/real time ratio; 0 = unlimited ({RELEASED_TIME_SCALE:g})",
     )
     p.add_argument(
         "--no-graphics",
@@ -76,7 +84,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--host",
-        default="127.0.0.1",
+        default=DEFAULT_HOST,
         help="address to listen on (127.0.0.1; 0.0.0.0 for remote clients, which logs a warning)",
     )
     p.add_argument(

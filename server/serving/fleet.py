@@ -35,6 +35,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from neuronsmae.protocol.defaults import DEFAULT_HOST, DEFAULT_PORT, DEFAULT_SEED
 from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.protocol.launch import check_timeout
 from neuronsmae.server.serving.locators import check_endpoint
@@ -117,9 +118,13 @@ def format_status(rows: list[dict[str, object]]) -> str:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--base-port", type=int, default=10000, help="port of server 0 (10000)")
+    p.add_argument(
+        "--base-port", type=int, default=DEFAULT_PORT, help=f"port of server 0 ({DEFAULT_PORT})"
+    )
     p.add_argument("--count", type=int, default=1, help="number of servers (1)")
-    p.add_argument("--host", default="127.0.0.1", help="address the servers listen on (127.0.0.1)")
+    p.add_argument(
+        "--host", default=DEFAULT_HOST, help=f"address the servers listen on ({DEFAULT_HOST})"
+    )
     p.add_argument(
         "--router",
         action="append",
@@ -141,7 +146,10 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _common(p)
     p.add_argument(
-        "--seed", type=int, default=1234, help="seed of server 0's first arena; +1 per arena (1234)"
+        "--seed",
+        type=int,
+        default=DEFAULT_SEED,
+        help=f"seed of server 0's first arena; +1 per arena ({DEFAULT_SEED})",
     )
     p.add_argument(
         "--arenas",

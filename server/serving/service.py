@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from neuronsmae.protocol.codec import encode
+from neuronsmae.protocol.defaults import DEFAULT_SEED, UNPACED
 from neuronsmae.protocol.errors import (
     BusyError,
     InvalidOptionError,
@@ -176,8 +177,8 @@ class ArenaService:
     def __init__(
         self,
         factory: Callable[..., ArenaAPI],
-        seed: int = 1234,
-        time_scale: float = 0.0,
+        seed: int = DEFAULT_SEED,
+        time_scale: float = UNPACED,
         lease_s: float = DEFAULT_LEASE_S,
         context_table: Callable[[], Any] | None = None,
         clock: Callable[[], float] = time.monotonic,

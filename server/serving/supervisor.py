@@ -21,6 +21,12 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
+from neuronsmae.protocol.defaults import (
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    DEFAULT_SEED,
+    RELEASED_TIME_SCALE,
+)
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.launch import ServerCommand, check_launch
 from neuronsmae.protocol.messages import MAX_SEED, max_first_seed
@@ -50,11 +56,11 @@ BAD_ARGUMENTS = 2
 class FleetSpec:
     """What to run: ``count`` servers from ``base_port``, seeds from ``seed``."""
 
-    base_port: int = 10000
+    base_port: int = DEFAULT_PORT
     count: int = 1
-    seed: int = 1234
-    host: str = "127.0.0.1"
-    time_scale: float = 100.0
+    seed: int = DEFAULT_SEED
+    host: str = DEFAULT_HOST
+    time_scale: float = RELEASED_TIME_SCALE
     lease: float = 60.0
     routers: tuple[str, ...] = ()
     log_level: str = "WARNING"

@@ -11,6 +11,7 @@ import sys
 import time
 from collections.abc import Sequence
 
+from neuronsmae.protocol.defaults import DEFAULT_SEED
 from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.protocol.messages import MAX_SEED
 from neuronsmae.server.arena import Arena
@@ -21,7 +22,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="neuronsmae-demo", description=__doc__.split("\n")[0])
     parser.add_argument("--blue", default="hard", choices=LEVEL_ARGS, help="blue bot level")
     parser.add_argument("--red", default="easy", choices=LEVEL_ARGS, help="red bot level")
-    parser.add_argument("--seed", type=int, default=1234)
+    parser.add_argument("--seed", type=int, default=DEFAULT_SEED)
     args = parser.parse_args(argv)
     if not 0 <= args.seed <= MAX_SEED:
         parser.error(f"--seed must be in 0..{MAX_SEED}, got {args.seed}")
