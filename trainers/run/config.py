@@ -138,14 +138,12 @@ class TrainConfig:
     ``paper`` preset's), and also randomised ``coef=0.5,0.7,1,1.4,1.7,2``
     (docs/reference.md, the context keys). See trainers/run/contexts.py."""
     workers: int = 0
-    """Rollout workers (Ray actors); 0 means one per core less one for the learner, and at
-    least two. Measured on 2 cores: two half-CPU workers beside the learner play 25 % more
-    episodes in 30 minutes than one (``python -m bench.bench_learning --workers 1`` against
-    the default two)."""
+    """Rollout workers (Ray actors), ≥ 0; 0 means one per core less one for the learner, and
+    at least two (the paper: 20)."""
     envs_per_worker: int = 8
     """Arenas each worker plays at once, in [1, 64], with one batched forward pass of the
-    agent network per decision for all of them. At 8 a served arena costs about 1.2 times
-    the CPU of an in-process one per decision (``python -m bench.bench_vector``)."""
+    agent network per decision for all of them (on a served worker: one request steps them
+    all; docs/benchmarks.md, "The vector path"). The paper: one arena per worker."""
     sync: bool = False
     """Paper's loop: play an iteration of episodes, wait for all, then learn; else learn as
     episodes land (asynchronous)."""

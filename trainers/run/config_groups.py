@@ -67,9 +67,7 @@ class LearnerConfig:
     """The algorithm's hyper-parameters: optimiser, exploration, networks, replay."""
 
     lr: float = 5e-4
-    """Adam learning rate, > 0 (paper: 5e-4). Measured against the easy bot: 1e-3 reaches
-    0.8 sooner but stays there, 5e-4 climbs higher (``python -m bench.bench_learning --set
-    lr=1e-3`` against the defaults)."""
+    """Adam learning rate, > 0 (paper: 5e-4)."""
     gamma: float = 0.99
     """Discount in [0, 1] (paper: 0.99)."""
     eps_start: float = 0.2
@@ -80,48 +78,38 @@ class LearnerConfig:
     """Training episodes over which ε falls linearly from eps_start to eps_end, ≥ 0 (0: ε
     is eps_end from the first episode)."""
     target_update_interval: int = 100
-    """Gradient updates between hard target refreshes, ≥ 1 (100 = every 50 episodes at the
-    default 2 updates per episode; the paper's "every 5 iterations" of 20 workers is 100
-    episodes). Measured: refreshing every 10 episodes (``--set target_update_interval=20``)
-    kept the greedy win rate oscillating."""
+    """Updates (or rounds, see ``target_update_unit``) between hard target refreshes, ≥ 1.
+    100 updates are every 50 episodes at the default 2 updates per episode; the paper's
+    "every 5 iterations" of 20 workers is 100 episodes."""
     grad_clip: float = 10.0
     """Largest gradient norm of an update, > 0; larger ones are scaled down to it (paper: 10)."""
     agent_hidden: int = 128
-    """GRU width of the shared agent network, in [1, 4096] (paper: 128)."""
+    """Width of the shared agent network's hidden layers (the GRU's, or each of the MLP's
+    two), in [1, 4096] (paper: 128)."""
     mixer_embed: int = 32
     """QMIX mixing-layer width, in [1, 4096] (paper: 32)."""
     hypernet_hidden: int = 64
     """QMIX hypernetwork hidden width, in [1, 4096]."""
     td_lambda: float = 0.3
     """λ of the TD(λ) targets in [0, 1] (0: the paper's one-step targets; PyMARL2 uses 0.6).
-    Shorter returns carry fewer of the ε-greedy actions' consequences into the targets,
-    while λ > 0 still moves a win's +20 back faster. Measured against the easy bot in 30
-    minutes on 2 cores of a VM at 1,453 µs per decision (about 6,000 episodes; the fast VM's
-    runs of the defaults read 0.91 / 0.905 / 0.93, docs/results.md), test win rate over
-    seeds 1-3: 0.89 / 0.885 / 0.86 with 0.3, 0.90 / 0.86 with 0.1 (seeds 1-2), 0.86 / 0.875
-    with 0.6 (``python -m bench.bench_learning
-    --set td_lambda=0.6 --seed 2``)."""
+    λ > 0 carries a win's +20 back over many steps per update; a smaller λ carries fewer
+    of the ε-greedy actions' consequences into the targets."""
     double_q: bool = True
     """Pick the next action with the online network, value it with the target network."""
     features: str = "auto"
     """Agent inputs: raw (the paper's: the observation as given), relative (plus geometry
-    derived from it, see trainers/core/features.py; learns much faster on the abstract 2 v 2) or
-    auto: relative when the observation holds the poses and candidate points, else raw
-    (trainers/play/task.py)."""
+    derived from it, see trainers/core/features.py) or auto: relative when the observation
+    holds the poses and candidate points, else raw (``resolve_learner``)."""
     head: str = "auto"
     """Q head: flat (the paper's: a linear output per action), points (adds one small MLP
     that scores each action from its enemy's and point's features; needs 'relative' and
-    abstract actions) or auto: points where it fits, else flat. On the easy bot points
-    roughly doubles the greedy win rate after 500 episodes (measured with
-    ``bench/bench_learning.py``, against ``--set head=flat``)."""
+    abstract actions) or auto: points where it fits, else flat."""
     augment: str = "auto"
     """Replay each sampled episode under a random symmetry of the task, so the learner sees
     every scene in all its equivalent forms: 'none', a comma list of enemies (swap the
     enemy slots), field (turn the scene half a turn about the field's centre) and allies
-    (swap the agents), see trainers/core/symmetry.py, or auto: every one the task has (all three
-    on the default 2 v 2; trainers/play/task.py). Against the easy bot all three reach the 0.85
-    plateau in about half the episodes, but not higher (measured: 0.74-0.86 after 1,000
-    episodes against 0.625-0.78 with ``python -m bench.bench_learning --set augment=none``)."""
+    (swap the agents), see trainers/core/symmetry.py, or auto: every one the task has (all
+    three on the default 2 v 2; ``resolve_learner``). The paper: none."""
     last_action_input: bool = True
     """Give the agent network its one-hot last action."""
     agent_id_input: bool = True
@@ -264,8 +252,8 @@ class EvalConfig:
     eval_episodes: int = 50
     """Greedy episodes per evaluation, on held-out seeds, ≥ 1."""
     final_eval_episodes: int = 200
-    """Greedy episodes of the final evaluation at the end of the run (200: a win rate near
-    0.9 is then known to about ±0.04)."""
+    """Greedy episodes of the final evaluation at the end of the run, ≥ 1 (the paper's
+    200; a win rate near 0.9 is then known to about ±0.04 at 95 %)."""
     eval_seed: int = 1_000_000_000
     """First held-out seed; training episodes use seeds below it. Periodic evaluations
     (validation) use ``eval_seed + k``; the final evaluation (test) uses
@@ -342,25 +330,21 @@ class ClusterConfig:
     base_port: int = 0
     """env=remote: 0 (the default) gives every worker a private server on a free port, so
     runs never collide; a port P makes worker i use the server on P + i (a fleet started
-    with ``neuronsmae-serve --base-port P --arenas envs_per_worker --time-scale 0``;
+    with ``neuronsmae-fleet --base-port P --arenas envs_per_worker --time-scale 0``;
     without ``--time-scale 0`` a fleet is paced at 100x), launching one there if none answers."""
     max_worker_failures: int = 5
     """Consecutive failures after which a worker is given up instead of restarted, ≥ 1."""
     groups: int = 1
     """env=remote: groups a worker's arenas are split into, in [1, envs_per_worker], stepped
-    in turn (the server steps one group while the worker chooses the other's actions). 2
-    pays only where each worker and its server have a core of their own: on an
-    oversubscribed machine the smaller requests cost more than the overlap saves (2 cores,
-    load 7, 1 worker of 8 arenas: 0.450 of the bare arena's rate with 1 group, 0.367 with 2;
-    ``python -m bench.bench_sampling --workers 1 --envs 8 --groups 1 2``)."""
+    in turn (the server steps one group while the worker chooses the other's actions). More
+    than one pays only where each worker and its server have a core of their own
+    (docs/benchmarks.md, "Sampling")."""
     servers_per_worker: int = 1
     """env=remote with private servers (base_port 0, servers local): vector servers each
     worker launches, in [1, envs_per_worker], holding consecutive shares of its arenas and
-    stepped side by side, so one worker's arenas can use several cores. 2 pays where a
-    worker has more than its own core (1 worker of 8 arenas on 2 cores: 0.807 of the bare
-    arena's rate with 2 servers, 0.606 with 1; ``python -m bench.bench_sampling --workers 1
-    --envs 8 --servers 1 2``); where every core is taken (the learner and two workers on 2
-    cores) one server per worker costs the least CPU."""
+    stepped side by side, so one worker's arenas can use several cores. More than one pays
+    where a worker has more than its own core; where every core is taken one server per
+    worker costs the least CPU (docs/benchmarks.md, "Sampling")."""
     worker_resources: str = ""
     """Custom Ray resources each worker also requires, "name=amount[,...]" (e.g. "sampler=1"
     puts workers only on nodes started with --resources '{"sampler": N}', N per node)."""
@@ -373,7 +357,7 @@ class ClusterConfig:
     worker_resources."""
     router: str = ""
     """env=remote: reach server base_port + i through this Zenoh router (tcp/host:7447)
-    instead; the servers run outside Ray (neuronsmae-serve --router). See deploy/README.md."""
+    instead; the servers run outside Ray (neuronsmae-fleet --router). See deploy/README.md."""
 
     def __post_init__(self) -> None:
         check_types(self)

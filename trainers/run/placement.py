@@ -12,7 +12,7 @@ Three ways to give each rollout worker ``i`` its server (``env="remote"``):
   with ``server_resources``), starts a vector server bound to its node's IP and reports
   host and port; the worker connects with ``VecRM(host=..., port=..., launch=False)``. For
   clusters where simulation and learning-side workers should sit on different machines.
-* ``router="tcp/H:7447"``: the servers are run outside Ray (``neuronsmae-serve --router
+* ``router="tcp/H:7447"``: the servers are run outside Ray (``neuronsmae-fleet --router
   --arenas envs_per_worker``) and every worker reaches server ``base_port + i`` through
   that Zenoh router.
 

@@ -313,7 +313,7 @@ class Sampler:
     def close(self) -> None:
         """Close every worker's env, then stop the actors.
 
-        Closing first releases a server that outlives the run (``neuronsmae-serve``, a
+        Closing first releases a server that outlives the run (``neuronsmae-fleet``, a
         router) at once; killed without it, the server stays owned until its lease ends
         and the next run's workers are refused with ``BusyError`` meanwhile.
         """

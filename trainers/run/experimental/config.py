@@ -15,12 +15,8 @@ class ExperimentalConfig:
     """Probability in [0, 1] that a training episode replays a recent start the team did not
     win instead of a fresh seed (0: never, the paper's uniform starts); see
     trainers/run/experimental/starts.py. The agents lose mostly the starts they already judge
-    bad, and uniform seeds give those starts only their small share of the data. Measured
-    against the easy bot in 30 minutes on 2 cores of the fast VM (about 12,000 episodes)
-    with 0.3: test win rates 0.955, 0.92 and
-    0.935 on seeds 1-3 where the defaults read 0.91, 0.905 and 0.93 (``python -m
-    bench.bench_learning --set start_replay=0.3 --seed 2``); it learns sooner more than
-    it learns better (validation from 9,000 episodes on averages 0.915 against 0.923)."""
+    bad, and uniform seeds give those starts only their small share of the data (what it
+    was measured to do: docs/lab/results-log.md)."""
     start_replay_plays: int = 3
     """A lost start is played at most this many times in all (≥ 2), so unwinnable starts
     leave."""
