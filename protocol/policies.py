@@ -51,7 +51,8 @@ class TeamPolicy(Protocol):
 
     def act(self, obs: np.ndarray, avail: np.ndarray, arenas: Sequence[int]) -> np.ndarray:
         """Actions ``[m, n_agents]`` for ``arenas`` from their observations
-        ``[m, n_agents, obs_dim]`` and masks ``[m, n_agents, n_actions]``."""
+        ``[m, n_agents, obs_dim]`` and masks ``[m, n_agents, n_actions]`` (with continuous
+        actions ``[m, n_agents, 4]``: each agent's ``(vx, vy, omega, target)``)."""
 
 
 Loader = Callable[[str], TeamPolicy | None]

@@ -322,8 +322,12 @@ def _begin(plan: _Episodes, setup: Setup, arenas: list[int], episodes: list[Any]
 def _actions(setup: Setup, obs: np.ndarray, avail: np.ndarray, acting: list[int], nb: int,
              nr: int) -> np.ndarray:  # fmt: skip
     """Every arena's action row: blue's policy in the first ``nb`` columns, red's in the
-    next ``nr`` (zeros where a bot drives; the arena ignores them)."""
-    rows = np.zeros((obs.shape[0], obs.shape[1]), np.int64)
+    next ``nr`` (zeros where a bot drives; the arena ignores them). With continuous actions
+    each agent's entry is ``(vx, vy, omega, target)``."""
+    if setup.options.get("action_space") == "continuous":
+        rows = np.zeros((obs.shape[0], obs.shape[1], 4), np.float64)
+    else:
+        rows = np.zeros((obs.shape[0], obs.shape[1]), np.int64)
     if not acting or obs.shape[1] == 0:
         return rows
     idx = np.asarray(acting)

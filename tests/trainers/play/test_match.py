@@ -171,7 +171,7 @@ def test_a_record_dir_that_cannot_be_created_is_refused_before_playing(
 
 
 def test_a_side_no_loader_takes_names_the_levels_and_the_loaders() -> None:
-    with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: qlearner"):
+    with pytest.raises(InvalidOptionError, match=r"--red 'nowhere.pt'.*loaders: .*qlearner"):
         M.play("easy", "nowhere.pt", 1, 0)
 
 
