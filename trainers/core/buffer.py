@@ -22,11 +22,16 @@ and PyMARL's buffer).
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
+
+T = TypeVar("T")
 
 
 class IncompleteEpisodeError(ValueError):
@@ -152,6 +157,37 @@ class Batch:
     """``[B, T]`` float32."""
     filled: torch.Tensor
     """``[B, T]`` float32."""
+
+    def to(self, device: torch.device) -> Batch:
+        """This batch on ``device`` in one host-to-device transfer (itself on the CPU): the
+        fields packed into one buffer (:meth:`packed`), pinned on CUDA so the copy runs
+        asynchronously, sent once, and viewed back as the fields (:meth:`unpacked`)."""
+        if device.type == "cpu":
+            return self
+        packed, layout = self.packed()
+        if device.type == "cuda":
+            packed = packed.pin_memory()
+        return Batch.unpacked(packed.to(device, non_blocking=True), layout)
+
+    def packed(self) -> tuple[torch.Tensor, list[tuple[str, torch.dtype, torch.Size]]]:
+        """Every field's bytes in one contiguous ``uint8`` tensor, widest types first (so each
+        field starts aligned for its type), and the layout :meth:`unpacked` reads back."""
+        fields = sorted(
+            (f.name for f in dataclasses.fields(self)), key=lambda n: -getattr(self, n).itemsize
+        )
+        parts = [getattr(self, name).contiguous() for name in fields]
+        data = torch.cat([p.reshape(-1).view(torch.uint8) for p in parts])
+        return data, [(name, p.dtype, p.shape) for name, p in zip(fields, parts, strict=True)]
+
+    @staticmethod
+    def unpacked(data: torch.Tensor, layout: list[tuple[str, torch.dtype, torch.Size]]) -> Batch:
+        """The batch :meth:`packed` gave as ``data`` and ``layout``: views, no copies."""
+        out, start = {}, 0
+        for name, dtype, shape in layout:
+            size = shape.numel() * dtype.itemsize
+            out[name] = data[start : start + size].view(dtype).view(shape)
+            start += size
+        return Batch(**out)
 
 
 class EpisodeReplayBuffer:
@@ -342,6 +378,23 @@ class TransitionReplayBuffer:
             terminated=d["terminated"].unsqueeze(1),
             filled=torch.ones_like(d["rewards"]).unsqueeze(1),
         )
+
+
+def prefetched(make: Callable[[], T], n: int) -> Iterator[T]:
+    """``make()`` called ``n`` times, each call made in a background thread while the caller
+    works with the previous result: a batch is sampled, augmented and sent to the learner's
+    device while the previous one trains (torch releases the GIL in its kernels). The calls
+    run one after another, in order, so a seeded generator they draw from gives the same
+    batches as calling ``make`` inline."""
+    if n <= 0:
+        return
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch") as pool:
+        pending = pool.submit(make)
+        for i in range(n):
+            ready = pending.result()
+            if i + 1 < n:
+                pending = pool.submit(make)
+            yield ready
 
 
 REPLAYS: dict[str, type] = {"episodes": EpisodeReplayBuffer, "transitions": TransitionReplayBuffer}

@@ -191,12 +191,43 @@ def lambda_returns(
 ) -> torch.Tensor:
     """TD(λ) targets ``G_t = r_t + γ(1−d_t)[(1−λ) V_{t+1} + λ G_{t+1}]``, all ``[B, T, k]``.
 
-    ``next_values[:, t]`` is the target network's value of the state after step ``t``. With
-    λ = 0 this is the one-step target. λ > 0 carries the +20 of a win back over many steps
-    per update instead of one, which matters when the budget is a few thousand episodes.
-    Padding needs no special case: the last real step has ``d = 1`` and cuts the recursion,
-    and the padded steps after it are masked out of the loss.
+    ``next_values[:, t]`` is the target network's value of the state after step ``t``, and
+    the recursion starts from ``G_T = V_T``. With λ = 0 this is the one-step target. λ > 0
+    carries the +20 of a win back over many steps per update instead of one, which matters
+    when the budget is a few thousand episodes. Padding needs no special case: the last
+    real step has ``d = 1`` and cuts the recursion, and the padded steps after it are
+    masked out of the loss.
+
+    The recursion ``G_t = a_t + b_t G_{t+1}`` (``a_t = r_t + γ(1−d_t)(1−λ)V_{t+1}``,
+    ``b_t = γλ(1−d_t)``) is solved in tensors without a loop over time steps: a reverse
+    scan that composes the affine maps ``G ↦ a + bG`` in ⌈log₂ T⌉ doubling rounds (after
+    round r, ``(a_t, b_t)`` carries steps ``t .. t + 2^r − 1``), so an update launches a few
+    dozen operations instead of one per step (:func:`lambda_returns_loop` is the recursion
+    step by step, the reference it is tested against).
     """
+    one_step = rewards + gamma * (1.0 - terminated) * next_values
+    if lam <= 0.0:
+        return one_step
+    cont = (1.0 - terminated).expand_as(next_values)
+    a = rewards + gamma * cont * (1.0 - lam) * next_values  # [B, T, k]
+    b = gamma * lam * cont
+    span = 1
+    while span < a.shape[1]:  # compose each step with the one ``span`` later
+        a = torch.cat([a[:, :-span] + b[:, :-span] * a[:, span:], a[:, -span:]], dim=1)
+        b = torch.cat([b[:, :-span] * b[:, span:], b[:, -span:]], dim=1)
+        span *= 2
+    return a + b * next_values[:, -1:]
+
+
+def lambda_returns_loop(
+    rewards: torch.Tensor,
+    terminated: torch.Tensor,
+    next_values: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> torch.Tensor:
+    """:func:`lambda_returns` as the recursion reads, one step at a time from the last: the
+    reference the tensor form is tested (and benchmarked) against."""
     one_step = rewards + gamma * (1.0 - terminated) * next_values
     if lam <= 0.0:
         return one_step
@@ -207,6 +238,56 @@ def lambda_returns(
         carry = rewards[:, t] + gamma * (1.0 - terminated[:, t]) * blend
         out[:, t] = carry
     return out
+
+
+DEVICES = ("auto", "cpu", "cuda", "cuda:N")
+"""What ``learner.device`` may name (N a CUDA device index)."""
+
+
+class DeviceError(ValueError):
+    """A learner device that is not a valid name, or that this machine does not have."""
+
+
+def check_device_name(name: str) -> None:
+    """:class:`DeviceError` unless ``name`` has one of the forms of :data:`DEVICES`."""
+    kind, _, index = name.partition(":")
+    if not (name in ("auto", "cpu", "cuda") or (kind == "cuda" and index.isdigit())):
+        raise DeviceError(f"learner.device={name!r} is not valid; valid: {', '.join(DEVICES)}")
+
+
+def resolve_device(name: str) -> torch.device:
+    """The device ``name`` means here: ``auto`` is CUDA when torch sees a CUDA device and
+    the CPU otherwise; ``cuda`` and ``cuda:N`` must exist (:class:`DeviceError` names what
+    this machine has)."""
+    check_device_name(name)
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    device = torch.device(name)
+    count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    if device.type == "cuda" and count == 0:
+        raise DeviceError(
+            f"learner.device={name!r}: torch sees no CUDA device here (torch "
+            f"{torch.__version__}, CUDA build: {torch.version.cuda or 'none'}); valid here: "
+            "auto, cpu"
+        )
+    if device.type == "cuda" and (device.index or 0) >= count:
+        cudas = ", ".join(["cuda", *(f"cuda:{i}" for i in range(count))])
+        raise DeviceError(
+            f"learner.device={name!r}: this machine has {count} CUDA device(s); valid here: "
+            f"auto, cpu, {cudas}"
+        )
+    return device
+
+
+def _on_cpu(value: Any) -> Any:
+    """``value`` with every tensor in it copied to the CPU (dicts, lists and tuples walked)."""
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu()
+    if isinstance(value, dict):
+        return {k: _on_cpu(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_on_cpu(v) for v in value)
+    return value
 
 
 MIXER_STATES = ("state", "agent0_obs")
@@ -235,6 +316,7 @@ class QLearner:
         hypernet_layers: int = 2,
         mixer_state: str = "state",
         mask_destroyed: bool = True,
+        device: torch.device | str = "cpu",
     ) -> None:
         if mixer_state not in MIXER_STATES:
             raise ValueError(f"mixer_state={mixer_state!r}; valid: {', '.join(MIXER_STATES)}")
@@ -245,24 +327,29 @@ class QLearner:
         """Updates between hard target refreshes; None: only when :meth:`update_targets`
         is called (the trainer's per-round cadence)."""
         self.mixer_state, self.mask_destroyed = mixer_state, mask_destroyed
-        self.agent = spec.build()
+        self.device = torch.device(device)
+        """Where the networks, the optimiser and the batches live (acting weights and
+        checkpoints are always on the CPU)."""
+        self.agent = spec.build().to(self.device)
         state_dim = env.obs_dim if mixer_state == "agent0_obs" else env.state_dim
         self.mixer = make_mixer(mixer, env.n_agents, state_dim, mixer_embed, hypernet_hidden,
-                                hypernet_layers)  # fmt: skip
+                                hypernet_layers).to(self.device)  # fmt: skip
         self.target_agent = copy.deepcopy(self.agent)
         self.target_mixer = copy.deepcopy(self.mixer)
         self.params = [*self.agent.parameters(), *self.mixer.parameters()]
         self.optimizer = torch.optim.Adam(self.params, lr=lr)
         self.updates = 0
-        self.samples = 0
-        """Decision steps drawn into updates so far (padding not counted)."""
+        self._samples = torch.zeros((), dtype=torch.float64, device=self.device)
 
     def _mixer_states(self, batch: Batch) -> torch.Tensor:
         """What the mixer reads at every step ``[B, T+1, S]``."""
         return batch.obs[:, :, 0] if self.mixer_state == "agent0_obs" else batch.state
 
     def train(self, batch: Batch) -> dict[str, float]:
-        """One gradient step on the masked TD loss; refresh the targets when due."""
+        """One gradient step on the masked TD loss; refresh the targets when due. ``batch``
+        may be on the CPU or already on :attr:`device`."""
+        batch = batch.to(self.device)
+        self._samples = self._samples + batch.filled.sum()  # read (and synced) when asked
         # [B, T+1, n, A]; the last step only where double Q picks the next action with it
         q_all = sequence_q(self.agent, self.spec, batch, slice(None if self.double_q else -1))
         chosen = q_all[:, : batch.actions.shape[1]].gather(-1, batch.actions.unsqueeze(-1))
@@ -302,17 +389,28 @@ class QLearner:
         grad_norm = nn.utils.clip_grad_norm_(self.params, self.grad_clip)
         self.optimizer.step()
         self.updates += 1
-        self.samples += int(batch.filled.sum())
         every = self.target_update_interval
         if every is not None and self.updates % every == 0:
             self.update_targets()
+        count = mask.sum().clamp(min=1.0)
+        taken, target = (q_tot.detach() * mask).sum() / count, (targets * mask).sum() / count
+        figures = torch.stack([loss.detach(), grad_norm, taken, target]).tolist()  # one copy
         return {
-            "loss": float(loss.detach()),
-            "grad_norm": float(grad_norm),
+            "loss": figures[0],
+            "grad_norm": figures[1],
             "lr": float(self.optimizer.param_groups[0]["lr"]),
-            "q_taken": float((q_tot.detach() * mask).sum() / mask.sum().clamp(min=1.0)),
-            "target": float((targets * mask).sum() / mask.sum().clamp(min=1.0)),
+            "q_taken": figures[2],
+            "target": figures[3],
         }
+
+    @property
+    def samples(self) -> int:
+        """Decision steps drawn into updates so far (padding not counted)."""
+        return int(self._samples)
+
+    @samples.setter
+    def samples(self, value: int) -> None:
+        self._samples = torch.tensor(float(value), dtype=torch.float64, device=self.device)
 
     def update_targets(self) -> None:
         """Copy the online networks into the target networks (hard update)."""
@@ -325,16 +423,19 @@ class QLearner:
         return {k: v.detach().cpu().numpy().copy() for k, v in self.agent.state_dict().items()}
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to resume learning exactly (networks, targets, optimiser)."""
-        return {
-            "agent": self.agent.state_dict(),
-            "mixer": self.mixer.state_dict(),
-            "target_agent": self.target_agent.state_dict(),
-            "target_mixer": self.target_mixer.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
-            "updates": self.updates,
-            "samples": self.samples,
-        }
+        """Everything needed to resume learning exactly (networks, targets, optimiser), on
+        the CPU whatever :attr:`device` is, so a checkpoint loads on any device."""
+        return _on_cpu(
+            {
+                "agent": self.agent.state_dict(),
+                "mixer": self.mixer.state_dict(),
+                "target_agent": self.target_agent.state_dict(),
+                "target_mixer": self.target_mixer.state_dict(),
+                "optimizer": self.optimizer.state_dict(),
+                "updates": self.updates,
+                "samples": self.samples,
+            }
+        )
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved."""

@@ -24,6 +24,7 @@ from neuronsmae.trainers.checks import (
     check_types,
 )
 from neuronsmae.trainers.core.features import FEATURES, HEADS, POINT_FEATURES
+from neuronsmae.trainers.core.learner import DeviceError, check_device_name
 from neuronsmae.trainers.core.symmetry import GENERATORS, parse_generators
 from neuronsmae.trainers.play.task import Q_ACTION_SPACES
 from neuronsmae.trainers.run.contexts import ContextSpec, ContextSpecError
@@ -165,6 +166,12 @@ class LearnerConfig:
     """Layers of QMIX's weight hypernetworks, 1 or 2 (PyMARL's ``hypernet_layers``; the
     released code's ``two_hyper_layers=False`` is 1). The bias hypernetworks are one layer
     for b1 and two for b2 either way."""
+    device: str = "auto"
+    """Where the learner runs: auto (CUDA when torch sees a CUDA device, else the CPU), cpu,
+    cuda or cuda:N. The networks, targets, optimiser and batches live there; acting weights
+    go to the workers and checkpoints to disk on the CPU, so a checkpoint written on one
+    device loads on the other. A CUDA device this machine lacks stops the run before
+    anything starts. (The released code's ``--cuda``; the paper is silent.)"""
     eps_schedule: str = "episodes"
     """How ε falls from eps_start to eps_end: episodes (linearly with the run's episode
     count over ``eps_anneal_episodes``) or iterations (needs ``sync`` and
@@ -183,6 +190,10 @@ class LearnerConfig:
         check_choice("mixer_state", self.mixer_state, ("state", "agent0_obs"))
         check_choice("hypernet_layers", self.hypernet_layers, (1, 2))
         check_choice("eps_schedule", self.eps_schedule, ("episodes", "iterations"))
+        try:
+            check_device_name(self.device)
+        except DeviceError as err:
+            raise ConfigError(str(err)) from None
         if self.replay == "transitions" and self.agent_net != "mlp":
             raise ConfigError(
                 f"replay='transitions' needs agent_net='mlp' (a recurrent agent learns from "

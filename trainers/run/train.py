@@ -42,7 +42,7 @@ from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.protocol.errors import ClosedError
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.core.acting import Policy
-from neuronsmae.trainers.core.buffer import REPLAYS, Episode, ReplayMemoryError
+from neuronsmae.trainers.core.buffer import REPLAYS, Batch, Episode, ReplayMemoryError, prefetched
 from neuronsmae.trainers.core.checkpoint import (
     CHECKPOINT_NAME,
     CheckpointError,
@@ -52,7 +52,14 @@ from neuronsmae.trainers.core.checkpoint import (
     restore_rng,
     save_checkpoint,
 )
-from neuronsmae.trainers.core.learner import AgentSpec, EnvSpec, QLearner, agent_spec
+from neuronsmae.trainers.core.learner import (
+    AgentSpec,
+    DeviceError,
+    EnvSpec,
+    QLearner,
+    agent_spec,
+    resolve_device,
+)
 from neuronsmae.trainers.core.mixers import mixer_for_algorithm
 from neuronsmae.trainers.core.symmetry import augment, parse_generators, task_group
 from neuronsmae.trainers.play.evaluate import summarize
@@ -82,9 +89,12 @@ Hook = Callable[["Trainer"], None]
 """Called after every batch of landed episodes (tests use it to inject faults)."""
 
 
-def make_learner(env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig) -> QLearner:
+def make_learner(
+    env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig, device: torch.device | None = None
+) -> QLearner:
     """The learner of algorithm ``alg`` (its mixer by name) with the ``learner`` group's
-    settings."""
+    settings, on ``device`` (default: ``cfg.device`` resolved here)."""
+    device = resolve_device(cfg.device) if device is None else device
     per_update = cfg.target_update_unit == "updates"
     return QLearner(
         env, spec, mixer_for_algorithm(alg), lr=cfg.lr, gamma=cfg.gamma,
@@ -93,7 +103,7 @@ def make_learner(env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig) ->
         double_q=cfg.double_q, mixer_embed=cfg.mixer_embed,
         hypernet_hidden=cfg.hypernet_hidden, td_lambda=cfg.td_lambda,
         hypernet_layers=cfg.hypernet_layers, mixer_state=cfg.mixer_state,
-        mask_destroyed=cfg.mask_destroyed,
+        mask_destroyed=cfg.mask_destroyed, device=device,
     )  # fmt: skip
 
 
@@ -123,6 +133,11 @@ class Trainer:
                 f"give 1 to {cores}"
             )
         torch.set_num_threads(cfg.torch_threads)
+        try:
+            self.device = resolve_device(cfg.learner.device)
+            """Where the learner runs (``learner.device``, resolved before anything starts)."""
+        except DeviceError as err:
+            raise ConfigError(str(err)) from None
         self.competition = Competition(cfg)
         self.mode = "competitive" if self.competition.competitive else "cooperative"
         """The arenas' mode: competitive once a policy may play red (a bot then plays red
@@ -202,7 +217,7 @@ class Trainer:
             lc.head, info, lc.agent_net, lc.action_masks == "env",
         )  # fmt: skip
         self.competition.load_fixed(info)
-        self.learner = make_learner(self.env, self.spec, cfg.alg, cfg.learner)
+        self.learner = make_learner(self.env, self.spec, cfg.alg, cfg.learner, self.device)
         self.group = task_group(parse_generators(lc.augment), lc.features, info)
         env, size = self.env, cfg.learner.buffer_size
         try:
@@ -427,13 +442,18 @@ class Trainer:
         says so for this round."""
         lc, c = self.cfg.learner, self.counters
         refresh = lc.refreshes_targets(c.rounds)
-        for u in range(lc.updates_in_round(len(self.buffer))):
-            batch = self.buffer.sample(lc.batch_size, self.np_rng)
-            self.last_stats = self.learner.train(augment(batch, self.group, self.np_rng))
+        batches = prefetched(self._next_batch, lc.updates_in_round(len(self.buffer)))
+        for u, batch in enumerate(batches):
+            self.last_stats = self.learner.train(batch)
             if refresh and u == 0:
                 self.learner.update_targets()
         c.rounds += 1
         c.updates, c.samples = self.learner.updates, self.learner.samples
+
+    def _next_batch(self) -> Batch:
+        """A batch drawn and augmented with the run's generator, on the learner's device."""
+        batch = self.buffer.sample(self.cfg.learner.batch_size, self.np_rng)
+        return augment(batch, self.group, self.np_rng).to(self.learner.device)
 
     def _rounds_due(self, before: int, after: int) -> int:
         if self.cfg.sync:

@@ -151,3 +151,104 @@ def test_a_destroyed_robot_s_own_returns_end_at_its_destruction_for_iql(
     if g is not None:
         assert g[0, 0, 1] == 0.0  # nothing after its destruction reaches the dead robot
         assert g[0, 0, 0] == pytest.approx(0.9 * 0.9 * 20.0)
+
+
+# --- the faster step: the same mathematics -------------------------------------------------
+@pytest.mark.parametrize("lam", [0.0, 0.3, 0.6, 1.0])
+@pytest.mark.parametrize("k", [1, 2])
+def test_the_tensor_lambda_returns_equal_the_recursion(lam: float, k: int) -> None:
+    from neuronsmae.trainers.core.learner import lambda_returns_loop
+
+    g = torch.Generator().manual_seed(int(10 * lam) + k)
+    for steps in (1, 2, 3, 7, 50):
+        rewards = torch.randn(6, steps, 1, generator=g)
+        ended = (torch.rand(6, steps, 1, generator=g) < 0.2).float()
+        values = torch.randn(6, steps, k, generator=g)
+        fast = lambda_returns(rewards, ended, values, 0.99, lam)
+        slow = lambda_returns_loop(rewards, ended, values, 0.99, lam)
+        assert torch.allclose(fast, slow, atol=1e-5), (steps, (fast - slow).abs().max())
+
+
+@pytest.mark.parametrize("mixer", ["none", "vdn", "qmix"])
+def test_an_update_has_the_loss_and_gradients_of_the_recursive_targets(
+    mixer: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Today's step (the λ-return loop) and the faster one give the same loss and gradients
+    on the same batch from the same weights."""
+    from neuronsmae.trainers.core import learner as learner_module
+
+    rng = np.random.default_rng(4)
+    buf = EpisodeReplayBuffer(8, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(8):
+        buf.add(make_episode(LIMIT, rng, dead_from=3))
+    batch = buf.sample(8, rng)
+
+    def one_update(returns: object) -> tuple[float, list[torch.Tensor]]:
+        monkeypatch.setattr(learner_module, "lambda_returns", returns)
+        torch.manual_seed(0)
+        learner = _learner(mixer, td_lambda=0.6)
+        stats = learner.train(batch)
+        return stats["loss"], [p.grad.clone() for p in learner.params if p.grad is not None]
+
+    fast_loss, fast_grads = one_update(learner_module.lambda_returns)
+    slow_loss, slow_grads = one_update(learner_module.lambda_returns_loop)
+    assert fast_loss == pytest.approx(slow_loss, rel=1e-5)
+    for a, b in zip(fast_grads, slow_grads, strict=True):
+        assert torch.allclose(a, b, rtol=1e-4, atol=1e-6)
+
+
+def test_a_batch_packs_into_one_buffer_and_back_unchanged() -> None:
+    rng = np.random.default_rng(2)
+    buf = EpisodeReplayBuffer(4, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    buf.add(make_episode(4, rng, dead_from=2))
+    batch = buf.sample(3, rng)
+    data, layout = batch.packed()
+    assert data.dtype == torch.uint8 and data.dim() == 1
+    back = type(batch).unpacked(data, layout)
+    for name, dtype, _ in layout:
+        assert getattr(back, name).dtype == dtype
+        assert torch.equal(getattr(back, name), getattr(batch, name))
+    assert batch.to(torch.device("cpu")) is batch  # nothing to move on the CPU
+
+
+def test_checkpoint_state_is_on_the_cpu_and_samples_are_counted() -> None:
+    rng = np.random.default_rng(3)
+    buf = EpisodeReplayBuffer(4, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    buf.add(make_episode(LIMIT, rng))
+    learner = _learner("qmix")
+    learner.train(buf.sample(2, rng))
+    state = learner.state_dict()
+    tensors = [*state["agent"].values(), *state["optimizer"]["state"][0].values()]
+    assert all(t.device.type == "cpu" for t in tensors)
+    assert learner.samples == 2 * LIMIT and state["samples"] == 2 * LIMIT
+    again = _learner("qmix")
+    again.load_state_dict(state)
+    assert again.samples == 2 * LIMIT and again.updates == 1
+
+
+def test_a_device_this_machine_lacks_is_refused_naming_what_it_has() -> None:
+    from neuronsmae.trainers.core.learner import DeviceError, resolve_device
+
+    assert resolve_device("cpu") == torch.device("cpu")
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(DeviceError, match="valid: auto, cpu, cuda, cuda:N"):
+        resolve_device("gpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(DeviceError, match=r"no CUDA device here.*valid here: auto, cpu"):
+            resolve_device("cuda:0")
+
+
+def test_prefetched_batches_come_in_order_from_a_background_thread() -> None:
+    import threading
+
+    from neuronsmae.trainers.core.buffer import prefetched
+
+    made: list[str] = []
+
+    def make() -> int:
+        made.append(threading.current_thread().name)
+        return len(made)
+
+    assert list(prefetched(make, 5)) == [1, 2, 3, 4, 5]
+    assert all(name.startswith("prefetch") for name in made)
+    assert list(prefetched(make, 0)) == []
