@@ -61,6 +61,9 @@ class Counters:
     2,000; an episode batch counts its episodes' steps)."""
     rounds: int = 0
     """Training rounds (iterations in synchronous mode) that learned."""
+    learn_seconds: float = 0.0
+    """Wall time the learner spent in updates (drawing batches included), over all
+    sessions; the rest of ``wall_seconds`` the loop waited for episodes or evaluated."""
     wall_seconds: float = 0.0
     """Training wall time over all sessions of the run."""
     restarts: int = 0

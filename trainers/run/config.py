@@ -182,6 +182,11 @@ class TrainConfig:
             )
         if self.iteration_episodes < 0:
             raise ConfigError(f"iteration_episodes must be ≥ 0, got {self.iteration_episodes}")
+        if self.learner.replay_ratio > 0 and self.sync:
+            raise ConfigError(
+                "learner.replay_ratio > 0 decouples learning from sampling, which the "
+                "synchronous loop (sync=true, the paper's) does not: give one or the other"
+            )
         if self.learner.eps_schedule == "iterations" and not (
             self.sync and self.iteration_episodes
         ):

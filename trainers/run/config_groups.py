@@ -166,6 +166,16 @@ class LearnerConfig:
     """Layers of QMIX's weight hypernetworks, 1 or 2 (PyMARL's ``hypernet_layers``; the
     released code's ``two_hyper_layers=False`` is 1). The bias hypernetworks are one layer
     for b1 and two for b2 either way."""
+    replay_ratio: float = 0.0
+    """Learning decoupled from sampling when > 0: the learner trains in a thread of its own
+    while the workers go on sampling, at this many updates per stored episode (counted
+    once ``learning_starts`` are stored), kept within ``replay_tolerance`` by pausing the
+    faster side (trainers/run/decoupled.py; asynchronous loop, ``target_update_unit``
+    updates). 0: the learner trains inline, ``updates_per_round`` updates every
+    ``train_every`` episodes (a ratio of 2 per episode by default). The paper: 0."""
+    replay_tolerance: float = 0.1
+    """How far the decoupled learner may run ahead of, or fall behind, ``replay_ratio``, as a
+    fraction of the updates due, in (0, 1] (at least one episode's worth)."""
     device: str = "auto"
     """Where the learner runs: auto (CUDA when torch sees a CUDA device, else the CPU), cpu,
     cuda or cuda:N. The networks, targets, optimiser and batches live there; acting weights
@@ -198,6 +208,16 @@ class LearnerConfig:
             raise ConfigError(
                 f"replay='transitions' needs agent_net='mlp' (a recurrent agent learns from "
                 f"whole episodes), got agent_net={self.agent_net!r}"
+            )
+        if self.replay_ratio < 0 or not 0 < self.replay_tolerance <= 1:
+            raise ConfigError(
+                f"replay_ratio must be ≥ 0 and replay_tolerance in (0, 1], got "
+                f"{self.replay_ratio} and {self.replay_tolerance}"
+            )
+        if self.replay_ratio > 0 and self.target_update_unit != "updates":
+            raise ConfigError(
+                "replay_ratio > 0 (a decoupled learner has no rounds) needs "
+                f"target_update_unit='updates', got {self.target_update_unit!r}"
             )
         if self.updates_per_stored_batch < 0:
             raise ConfigError(

@@ -28,7 +28,10 @@ from tqdm import tqdm
 from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.trainers.checks import ConfigError
 
-RUN_FILES = ("config.json", "checkpoint.pt", "best.pt", "train.csv", "eval.csv", "episodes.csv")
+RUN_FILES = (
+    "config.json", "checkpoint.pt", "best.pt", "train.csv", "eval.csv", "episodes.csv",
+    "marl_eval.json",
+)  # fmt: skip
 """The files a run writes in its directory: their presence means a run is there."""
 PERMILLE = 1000
 """The bar's resolution: thousandths of the binding budget."""

@@ -23,10 +23,12 @@ trainers/run/competition.py); evaluations always play the ``level`` bot.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import random
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -65,6 +67,7 @@ from neuronsmae.trainers.core.symmetry import augment, parse_generators, task_gr
 from neuronsmae.trainers.play.evaluate import summarize
 from neuronsmae.trainers.play.rollout import Request
 from neuronsmae.trainers.play.task import blue_view
+from neuronsmae.trainers.run import marl_eval
 from neuronsmae.trainers.run.competition import Competition
 from neuronsmae.trainers.run.config import ConfigError, TrainConfig, check_resumable, make_config
 from neuronsmae.trainers.run.config_groups import (
@@ -74,6 +77,7 @@ from neuronsmae.trainers.run.config_groups import (
     resolve_learner,
 )
 from neuronsmae.trainers.run.contexts import ContextSpec
+from neuronsmae.trainers.run.decoupled import LearnerThread
 from neuronsmae.trainers.run.experimental import StartReplay
 from neuronsmae.trainers.run.interrupt import POLL_SECONDS, StopSignals, TrainingInterrupted
 from neuronsmae.trainers.run.placement import sampler_placement, start_ray
@@ -120,6 +124,13 @@ class Trainer:
         self.run_dir = cfg.run_dir
         self.counters = Counters()
         self.np_rng = np.random.default_rng(cfg.seed)
+        self.learner_lock = threading.Lock()
+        """Held while the learner's state is updated or read (the decoupled learner's
+        thread updates it; see trainers/run/decoupled.py)."""
+        self.buffer_lock = threading.Lock()
+        """Held while the replay is written or drawn from."""
+        self.decoupled: LearnerThread | None = None
+        """The learner's own thread (``learner.replay_ratio`` > 0), while a session runs."""
         exp = cfg.experimental
         self.starts = StartReplay(
             exp.start_replay, exp.start_replay_plays, exp.start_replay_capacity, cfg.seed
@@ -288,7 +299,11 @@ class Trainer:
         self.resumed_steps = self.counters.env_steps
 
     def close(self) -> None:
-        """Stop the workers, and Ray too if this trainer started it."""
+        """Stop the learner's thread, the workers, and Ray too if this trainer started it."""
+        if self.decoupled is not None:
+            with contextlib.suppress(RuntimeError):  # its error was raised in the run
+                self.decoupled.stop()
+            self.decoupled = None
         if getattr(self, "sampler", None) is not None:
             self.sampler.close()
         if self.owns_ray and ray.is_initialized():
@@ -315,6 +330,7 @@ class Trainer:
             self._start_session()
             with self.stop:
                 self._run_sync() if cfg.sync else self._run_async()
+            self._stop_learner_thread()
             self.checkpoint()
             if self.stop.requested:
                 raise TrainingInterrupted(self.run_dir, self.counters.episodes, self.stop.requested)
@@ -325,6 +341,7 @@ class Trainer:
             }
             best = self._evaluate_best()
             self.checkpoint(finished=True)
+            marl_eval.write(self.run_dir)
         finally:
             if self.recorder is not None:
                 self.recorder.close()
@@ -344,6 +361,18 @@ class Trainer:
         self.session_start = time.perf_counter()
         self.session_steps = 0
         self.wall_base = self.counters.wall_seconds
+        self.session_episodes = self.counters.episodes
+        self.learn_base = self.counters.learn_seconds
+        self.broadcast_at = self.learner.updates
+        lc = self.cfg.learner
+        if lc.replay_ratio > 0:
+            own = np.random.default_rng([self.cfg.seed, self.counters.episodes, 1])
+            self.decoupled = LearnerThread(
+                self.learner, lambda: self._next_batch(own), ratio=lc.replay_ratio,
+                tolerance=lc.replay_tolerance, learning_starts=lc.learning_starts,
+                lock=self.learner_lock,
+            )  # fmt: skip
+            self.decoupled.start()
         self.sampler.broadcast(self._policy())
         if self.competition.pool.snapshot_due(0, 0):  # the first snapshot: the start weights
             self._snapshot()
@@ -366,7 +395,9 @@ class Trainer:
     def _run_async(self) -> None:
         cfg, issued = self.cfg, self.counters.episodes
         while self._more():
-            while self.sampler.idle_slots() > 0 and issued < cfg.episodes:
+            if self.decoupled is not None:
+                self.decoupled.check()
+            while self.sampler.idle_slots() > 0 and issued < cfg.episodes and not self._throttled():
                 # One episode per arena; near the end of the budget, shared among workers.
                 share = -(-(cfg.episodes - issued) // self.sampler.n_live)
                 n = min(cfg.envs_per_worker, share)
@@ -402,7 +433,8 @@ class Trainer:
         cfg, c = self.cfg, self.counters
         before = c.episodes
         for episode in episodes:
-            self.buffer.add(episode)
+            with self.buffer_lock:
+                self.buffer.add(episode)
             self.stored_seeds.append(episode.info["seed"])
             self.starts.record(episode.info["seed"], episode.info.get("winner") == "blue")
             self.recent.append(episode)
@@ -414,9 +446,13 @@ class Trainer:
         self.seen_restarts = self.sampler.restarts
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
-        if rounds and len(self.buffer) >= cfg.learner.learning_starts:
+        if self.decoupled is not None:
+            self._keep_up_with_learner_thread()
+        elif rounds and len(self.buffer) >= cfg.learner.learning_starts:
+            start = time.perf_counter()
             for _ in range(rounds):
                 self._learn_round()
+            c.learn_seconds += time.perf_counter() - start
             self.sampler.broadcast(self._policy())
         if self.competition.pool.snapshot_due(before, c.episodes):
             self._snapshot()
@@ -450,10 +486,41 @@ class Trainer:
         c.rounds += 1
         c.updates, c.samples = self.learner.updates, self.learner.samples
 
-    def _next_batch(self) -> Batch:
-        """A batch drawn and augmented with the run's generator, on the learner's device."""
-        batch = self.buffer.sample(self.cfg.learner.batch_size, self.np_rng)
-        return augment(batch, self.group, self.np_rng).to(self.learner.device)
+    def _next_batch(self, rng: np.random.Generator | None = None) -> Batch:
+        """A batch drawn and augmented with ``rng`` (the run's generator by default), on the
+        learner's device."""
+        rng = self.np_rng if rng is None else rng
+        with self.buffer_lock:
+            batch = self.buffer.sample(self.cfg.learner.batch_size, rng)
+        return augment(batch, self.group, rng).to(self.learner.device)
+
+    def _throttled(self) -> bool:
+        """Sampling waits: the decoupled learner lags its replay ratio."""
+        return self.decoupled is not None and self.decoupled.behind()
+
+    def _keep_up_with_learner_thread(self) -> None:
+        """Tell the learner's thread what is stored; take its counters, and send the workers
+        its weights once it has made a round's worth of updates since the last ones."""
+        thread, c, lc = self.decoupled, self.counters, self.cfg.learner
+        assert thread is not None
+        thread.stored(c.episodes - self.session_episodes)
+        thread.check()
+        c.updates, c.samples = self.learner.updates, self.learner.samples
+        c.learn_seconds = self.learn_base + thread.busy_seconds
+        self.last_stats = thread.last_stats
+        if c.updates - self.broadcast_at >= lc.updates_per_round * lc.train_every:
+            self.broadcast_at = c.updates
+            self.sampler.broadcast(self._policy())
+
+    def _stop_learner_thread(self) -> None:
+        """End the learner's thread (after its update in hand) and take its last counters."""
+        if self.decoupled is None:
+            return
+        self.decoupled.stop()
+        c = self.counters
+        c.updates, c.samples = self.learner.updates, self.learner.samples
+        c.learn_seconds = self.learn_base + self.decoupled.busy_seconds
+        self.decoupled = None
 
     def _rounds_due(self, before: int, after: int) -> int:
         if self.cfg.sync:
@@ -471,7 +538,8 @@ class Trainer:
 
     # --- records -----------------------------------------------------------------------
     def _policy(self) -> Policy:
-        return Policy(self.spec, self.learner.acting_weights())
+        with self.learner_lock:
+            return Policy(self.spec, self.learner.acting_weights())
 
     def _train_row(self) -> dict[str, Any]:
         c, recent = self.counters, list(self.recent)
@@ -530,7 +598,8 @@ class Trainer:
         """Write the best weights as a checkpoint-format file that the match command loads
         (the learner's other state is the current one: resume from checkpoint.pt)."""
         assert self.best is not None
-        state = self.learner.state_dict()
+        with self.learner_lock:
+            state = self.learner.state_dict()
         state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
         save_checkpoint(
             self.run_dir / BEST_NAME,
@@ -557,12 +626,14 @@ class Trainer:
     def checkpoint(self, finished: bool = False) -> None:
         """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``
         (``finished``: after the final evaluation)."""
+        with self.learner_lock:
+            state = self.learner.state_dict()
         save_checkpoint(
             self.run_dir / CHECKPOINT_NAME,
             config=self.cfg.to_dict(),
             env=self.env,
             spec=self.spec,
-            learner_state=self.learner.state_dict(),
+            learner_state=state,
             counters=self.counters,
             np_rng=self.np_rng,
             starts=self.starts.state_dict(),

@@ -228,8 +228,10 @@ def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: P
     killed: list[int] = []
 
     def kill_worker_mid_run(trainer: Trainer) -> None:
-        busy = {t.worker for t in trainer.sampler.in_flight.values()}
-        if not killed and trainer.counters.episodes >= 3 and 0 in busy:
+        playing = [ref for ref, t in trainer.sampler.in_flight.items() if t.worker == 0]
+        # still playing: its chunk has not finished (a finished one would be collected whole)
+        done, _ = ray.wait(playing, num_returns=len(playing), timeout=0) if playing else ([], [])
+        if not killed and trainer.counters.episodes >= 3 and playing and not done:
             ray.kill(trainer.sampler.actors[0])  # the actor dies while playing an episode
             killed.append(trainer.counters.episodes)
 
@@ -248,45 +250,42 @@ def test_killed_worker_is_restarted_and_no_partial_episode_is_stored(tmp_path: P
         assert buf.terminated[i, steps - 1] == 1
 
 
-def test_the_paper_loop_learns_once_per_iteration_and_refreshes_targets_every_5(
-    tmp_path: Path,
+def test_the_released_loop_learns_after_each_iteration_and_copies_targets_every_5th(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The paper preset on two workers: iterations of 20 episodes, one update each, the
-    target networks equal to the online ones exactly at every fifth update."""
+    """The paper preset (the released loop) on two workers: iterations of 20 episodes, then
+    max(20, 2·⌊stored / 2,000⌋) updates (20 while fewer than 20,000 transitions are stored),
+    the targets copied at the first update of iterations 0 and 5; tests at coef 1.5 and 1.0."""
+    from neuronsmae.trainers.core.learner import QLearner
+
+    copies: list[int] = []
+    real = QLearner.update_targets
+
+    def spy(self: QLearner) -> None:
+        copies.append(self.updates)
+        real(self)
+
+    monkeypatch.setattr(QLearner, "update_targets", spy)
+    tiny = {k: v for k, v in (kv.split("=") for kv in TINY) if k != "batch_size"}
     cfg = make_config(
         preset("paper"),
-        dict(kv.split("=") for kv in TINY),
+        tiny,
         {
-            "workers": 2,
-            "envs_per_worker": 5,
-            "episodes": 160,
-            "out": str(tmp_path),
-            "progress": False,
-            "learning_starts": 20,
-            "eval.eval_every": 0,
+            "workers": 2, "envs_per_worker": 5, "episodes": 160, "out": str(tmp_path),
+            "progress": False, "learning_starts": 0, "eval.eval_every": 0,
         },
-    )
-    seen: list[tuple[int, int, bool]] = []
-
-    def hook(trainer: Trainer) -> None:
-        learner = trainer.learner
-        same = all(
-            torch.equal(a, b)
-            for a, b in zip(
-                learner.agent.state_dict().values(),
-                learner.target_agent.state_dict().values(),
-                strict=True,
-            )
-        )
-        seen.append((trainer.counters.episodes, learner.updates, same))
-
-    result = Trainer(cfg, hook=hook).run()
-    assert [e for e, _, _ in seen] == list(range(20, 161, 20))
-    assert [u for _, u, _ in seen] == list(range(1, 9))  # one update per iteration
-    assert [same for _, u, same in seen] == [u % 5 == 0 for _, u, _ in seen]
-    assert result["extra_tests"]["coef=1.5"]["contexts"] == "coef=1.5"
+    )  # fmt: skip
+    seen: list[tuple[int, int]] = []
+    result = Trainer(
+        cfg, hook=lambda t: seen.append((t.counters.episodes, t.learner.updates))
+    ).run()
+    assert seen == [(e, e) for e in range(20, 161, 20)]  # 20 updates per iteration
+    assert copies == [1, 101]  # the first update of iterations 0 and 5
+    assert result["counters"]["rounds"] == 8 and result["counters"]["samples"] > 0
+    assert result["extra_tests"]["coef=1.0"]["contexts"] == "coef=1.0"
+    assert {"released_win_rate", "win_rate"} <= set(result["final"])
     with (tmp_path / "eval.csv").open() as f:
-        assert {r["contexts"] for r in csv.DictReader(f)} == {"main", "coef=1.5"}
+        assert {r["contexts"] for r in csv.DictReader(f)} == {"main", "coef=1.0"}
 
 
 def test_each_episode_draws_its_contexts_and_a_resumed_run_draws_the_same(
@@ -460,3 +459,38 @@ def test_a_trainer_runs_once_and_one_that_never_ran_leaves_no_run_behind(
     with pytest.raises(ConfigError, match="alg 'vdn' -> 'iql'"):
         Trainer(other, resume=True)
     assert json.loads((tmp_path / "config.json").read_text())["alg"] == "vdn"
+
+
+def test_a_decoupled_learner_keeps_its_ratio_and_stores_every_episode(tmp_path: Path) -> None:
+    """replay_ratio > 0: the learner trains in its own thread while the workers sample; the
+    updates stay within the tolerance of ratio × stored episodes, and every episode that
+    landed is stored and recorded once."""
+    seen: list[tuple[int, int, float]] = []
+
+    def watch(trainer: Trainer) -> None:
+        thread = trainer.decoupled
+        assert thread is not None
+        seen.append((trainer.counters.episodes, trainer.learner.updates, thread.target()))
+
+    cfg = make_config(
+        {k: v for k, v in (kv.split("=") for kv in TINY)},
+        {"alg": "vdn", "episodes": 24, "workers": 2, "env": "inprocess", "out": str(tmp_path),
+         "progress": False, "eval.eval_every": 0, "learner.replay_ratio": 2.0},
+    )  # fmt: skip
+    trainer = Trainer(cfg, hook=watch)
+    result = trainer.run()
+    counters = result["counters"]
+    assert counters["episodes"] == 24 == len(trainer.stored_seeds)
+    assert len(set(trainer.stored_seeds)) == 24  # each landed episode stored once
+    with (tmp_path / "episodes.csv").open() as f:
+        assert [int(r["episode"]) for r in csv.DictReader(f)] == list(range(1, 25))
+    assert counters["updates"] > 0 and counters["learn_seconds"] > 0
+    from bench.baselines_report import scores
+    from neuronsmae.trainers.run.marl_eval import check_format
+
+    exported = json.loads((tmp_path / "marl_eval.json").read_text())  # read back
+    check_format(exported)
+    assert scores(exported)["vdn"]["coop_abstract_easy"].tolist() == [result["final"]["win_rate"]]
+    for _, updates, target in seen:  # never ahead of the ratio by more than its slack
+        assert updates <= target + max(2.0, 0.1 * target) + 1
+    assert counters["updates"] <= 2.0 * (24 - 4) * 1.1 + 2
