@@ -696,6 +696,94 @@ def bots(data: Data) -> str:
     return "\n".join([*table(head, body), "", about, "", measured(data, [src])])
 
 
+def _present(data: Data, name: str) -> list[dict[str, Any]]:
+    """The sources of table ``name`` whose files exist (none yet: not measured)."""
+    return [src for src in data.sources(name) if (data.dir / src["file"]).exists()]
+
+
+def baselines_iqm(data: Data) -> str:
+    """Every learner on one scale: the IQM of its runs' test win rates with a 95 %
+    stratified-bootstrap interval, and the probability of improvement between pairs."""
+    srcs = _present(data, "baselines_iqm")
+    if not srcs:
+        return "Not measured yet."
+    result = data.load(srcs[0]["file"])
+    head = ("learner", "runs", "tasks", "IQM of the test win rate", "95 % interval")
+    body = [
+        (alg, str(r["runs"]), ", ".join(r["tasks"]), rate(r["iqm"]),
+         f"{rate(r['ci95'][0])}–{rate(r['ci95'][1])}")
+        for alg, r in result["iqm"].items()
+    ]  # fmt: skip
+    pairs = [p for p in result["improvement"] if p["x"] < p["y"]]
+    head2 = ("X", "Y", "P(X > Y)", "95 % interval")
+    body2 = [(p["x"], p["y"], rate(p["p"]), f"{rate(p['ci95'][0])}–{rate(p['ci95'][1])}")
+             for p in pairs]  # fmt: skip
+    return "\n".join([*table(head, body), "", *table(head2, body2), "", measured(data, srcs)])
+
+
+def learner(data: Data) -> str:
+    """Each learner's updates/s and sampled transitions/s, and the faster step's gain over
+    the step before it, per device and thread count."""
+    srcs = _present(data, "learner")
+    if not srcs:
+        return "Not measured yet."
+    rows = [row for src in srcs for row in data.load(src["file"])["rows"]]
+    head = ("learner", "alg", "batch", "device", "threads", "ms per update", "updates/s",
+            "transitions/s", "before: ms per update", "speedup")  # fmt: skip
+    body = [
+        (r["learner"], r["alg"].upper(), count(r["batch"]), r["device"], str(r["threads"] or "—"),
+         f"{r['new']['ms_per_update']:.1f}", f"{r['new']['updates_per_s']:.1f}",
+         count(r["new"]["transitions_per_s"]),
+         f"{r['reference']['ms_per_update']:.1f}" if "reference" in r else "—",
+         f"{r['speedup']:.2f}" if "speedup" in r else "—")
+        for r in rows
+    ]  # fmt: skip
+    about = ("Batch: episodes for the defaults' learner, transitions for the released one. "
+             "Medians of the repeats; *before* is the step as it was before the faster "
+             "learner (the λ-returns by a loop over time steps, batches drawn inline), timed "
+             "in the same repeats.")  # fmt: skip
+    return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
+
+
+def training_scaling(data: Data) -> str:
+    """Training episodes and updates per minute against the worker count."""
+    srcs = _present(data, "training_scaling")
+    if not srcs:
+        return "Not measured yet."
+    run = data.load(srcs[0]["file"])
+    head = ("learner", "workers", "episodes/min", "env steps/min", "updates/min",
+            "learner's share of the wall time")  # fmt: skip
+    body = [
+        (r["learner"], str(r["workers"]), count(r["episodes_per_min"]),
+         count(r["env_steps_per_min"]), count(r["updates_per_min"]), f"{r['learner_share']:.2f}")
+        for r in run["rows"]
+    ]  # fmt: skip
+    about = (f"{run['minutes']:g} minutes of training per row, arenas {run['env']}; "
+             f"{run['cores']} cores for every worker count, so the larger counts are "
+             "oversubscribed: the shape of the curve, not a cluster's speed.")  # fmt: skip
+    return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
+
+
+def decoupled(data: Data) -> str:
+    """The main job with the learner inline and decoupled: episodes, updates and the test
+    win rate in its 30 minutes, run by run in the order they ran."""
+    srcs = _present(data, "decoupled")
+    if not srcs:
+        return "Not measured yet."
+    head = ("loop", "seed", "training episodes", "updates", "learner's share of the wall time",
+            "test win rate (final weights)")  # fmt: skip
+    body = []
+    for src in srcs:
+        run = data.load(src["file"])
+        c = run["counters"]
+        ratio = run["config"]["learner"].get("replay_ratio", 0.0)
+        loop = f"decoupled (replay ratio {ratio:g})" if ratio > 0 else "inline (2 per episode)"
+        body.append((loop, str(run["seed"]), count(c["episodes"]), count(c["updates"]),
+                     f"{c.get('learn_seconds', 0.0) / c['wall_seconds']:.2f}",
+                     rate(run["final"]["win_rate"])))  # fmt: skip
+    return "\n".join([*table(head, body), "", measured(data, srcs)])
+
+
 TABLES: dict[str, Callable[[Data], str]] = {
     "main_job": main_job,
     "variants": variants,
@@ -712,6 +800,10 @@ TABLES: dict[str, Callable[[Data], str]] = {
     "sampling_layouts": sampling_layouts,
     "scaling": scaling,
     "bots": bots,
+    "baselines_iqm": baselines_iqm,
+    "learner": learner,
+    "training_scaling": training_scaling,
+    "decoupled": decoupled,
 }
 """Each placeholder's function: docs/data → the Markdown that replaces the placeholder."""
 
