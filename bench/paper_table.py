@@ -6,7 +6,7 @@
                                 [--report | --test-at KEY=VALUE;...]
 
 ``--learner paper`` (the default) trains every cell with ``--preset paper``, the authors'
-released training code (trainers/run/config.py ``PRESETS``): 30,000 episodes, then the final
+released training code (trainers/run/presets.py ``PRESETS``): 30,000 episodes, then the final
 weights tested on 200 held-out episodes at coef 1.5 with the released win rule, the
 referee's win/draw/loss beside it, and at coef 1.0 as a second column. ``--learner
 defaults`` trains with this project's own learner under a 30-minute budget (VDN by

@@ -23,12 +23,10 @@ trainers/run/competition.py); evaluations always play the ``level`` bot.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import os
 import random
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -44,7 +42,7 @@ from neuronsmae.protocol.contexts import check_contexts
 from neuronsmae.protocol.errors import ClosedError
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.core.acting import Policy
-from neuronsmae.trainers.core.buffer import REPLAYS, Batch, Episode, ReplayMemoryError, prefetched
+from neuronsmae.trainers.core.buffer import REPLAYS, Episode, ReplayMemoryError
 from neuronsmae.trainers.core.checkpoint import (
     CHECKPOINT_NAME,
     CheckpointError,
@@ -63,7 +61,7 @@ from neuronsmae.trainers.core.learner import (
     resolve_device,
 )
 from neuronsmae.trainers.core.mixers import mixer_for_algorithm
-from neuronsmae.trainers.core.symmetry import augment, parse_generators, task_group
+from neuronsmae.trainers.core.symmetry import parse_generators, task_group
 from neuronsmae.trainers.play.evaluate import summarize
 from neuronsmae.trainers.play.rollout import Request
 from neuronsmae.trainers.play.task import blue_view
@@ -77,9 +75,9 @@ from neuronsmae.trainers.run.config_groups import (
     resolve_learner,
 )
 from neuronsmae.trainers.run.contexts import ContextSpec
-from neuronsmae.trainers.run.decoupled import LearnerThread
 from neuronsmae.trainers.run.experimental import StartReplay
 from neuronsmae.trainers.run.interrupt import POLL_SECONDS, StopSignals, TrainingInterrupted
+from neuronsmae.trainers.run.learning import Learning
 from neuronsmae.trainers.run.placement import sampler_placement, start_ray
 from neuronsmae.trainers.run.records import Recorder, RunLock, check_new_run_dir, trim_records
 from neuronsmae.trainers.run.sampler import Sampler
@@ -124,13 +122,8 @@ class Trainer:
         self.run_dir = cfg.run_dir
         self.counters = Counters()
         self.np_rng = np.random.default_rng(cfg.seed)
-        self.learner_lock = threading.Lock()
-        """Held while the learner's state is updated or read (the decoupled learner's
-        thread updates it; see trainers/run/decoupled.py)."""
-        self.buffer_lock = threading.Lock()
-        """Held while the replay is written or drawn from."""
-        self.decoupled: LearnerThread | None = None
-        """The learner's own thread (``learner.replay_ratio`` > 0), while a session runs."""
+        self.learning: Learning | None = None
+        """The learner's side: the Q-learner, its replay and batches (set by ``_build``)."""
         exp = cfg.experimental
         self.starts = StartReplay(
             exp.start_replay, exp.start_replay_plays, exp.start_replay_capacity, cfg.seed
@@ -194,7 +187,6 @@ class Trainer:
             self.close()
             raise
         self.recent: deque[Episode] = deque(maxlen=100)
-        self.last_stats: dict[str, float] = {}
         self.evals: list[dict[str, Any]] = []
         self.stored_seeds: list[int] = []
         """Reset seeds of the stored training episodes, in arrival order (for tests)."""
@@ -229,13 +221,15 @@ class Trainer:
         )  # fmt: skip
         self.competition.load_fixed(info)
         self.learner = make_learner(self.env, self.spec, cfg.alg, cfg.learner, self.device)
-        self.group = task_group(parse_generators(lc.augment), lc.features, info)
+        group = task_group(parse_generators(lc.augment), lc.features, info)
         env, size = self.env, cfg.learner.buffer_size
         try:
             self.buffer = REPLAYS[lc.replay](size, env.n_agents, env.obs_dim, env.state_dim,
                                              env.n_actions, env.episode_limit)  # fmt: skip
         except ReplayMemoryError as err:
             raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
+        self.learning = Learning(cfg.learner, self.learner, self.buffer, group, self.np_rng,
+                                 cfg.seed)  # fmt: skip
 
     def _check_contexts(self, workers: bool = True) -> None:
         """Check every value the contexts can take against the protocol's table (before any
@@ -300,10 +294,8 @@ class Trainer:
 
     def close(self) -> None:
         """Stop the learner's thread, the workers, and Ray too if this trainer started it."""
-        if self.decoupled is not None:
-            with contextlib.suppress(RuntimeError):  # its error was raised in the run
-                self.decoupled.stop()
-            self.decoupled = None
+        if self.learning is not None:
+            self.learning.close()
         if getattr(self, "sampler", None) is not None:
             self.sampler.close()
         if self.owns_ray and ray.is_initialized():
@@ -330,7 +322,7 @@ class Trainer:
             self._start_session()
             with self.stop:
                 self._run_sync() if cfg.sync else self._run_async()
-            self._stop_learner_thread()
+            self.learning.end(self.counters)
             self.checkpoint()
             if self.stop.requested:
                 raise TrainingInterrupted(self.run_dir, self.counters.episodes, self.stop.requested)
@@ -361,18 +353,7 @@ class Trainer:
         self.session_start = time.perf_counter()
         self.session_steps = 0
         self.wall_base = self.counters.wall_seconds
-        self.session_episodes = self.counters.episodes
-        self.learn_base = self.counters.learn_seconds
-        self.broadcast_at = self.learner.updates
-        lc = self.cfg.learner
-        if lc.replay_ratio > 0:
-            own = np.random.default_rng([self.cfg.seed, self.counters.episodes, 1])
-            self.decoupled = LearnerThread(
-                self.learner, lambda: self._next_batch(own), ratio=lc.replay_ratio,
-                tolerance=lc.replay_tolerance, learning_starts=lc.learning_starts,
-                lock=self.learner_lock,
-            )  # fmt: skip
-            self.decoupled.start()
+        self.learning.begin(self.counters)
         self.sampler.broadcast(self._policy())
         if self.competition.pool.snapshot_due(0, 0):  # the first snapshot: the start weights
             self._snapshot()
@@ -395,9 +376,12 @@ class Trainer:
     def _run_async(self) -> None:
         cfg, issued = self.cfg, self.counters.episodes
         while self._more():
-            if self.decoupled is not None:
-                self.decoupled.check()
-            while self.sampler.idle_slots() > 0 and issued < cfg.episodes and not self._throttled():
+            self.learning.check()
+            while (
+                self.sampler.idle_slots() > 0
+                and issued < cfg.episodes
+                and not self.learning.throttled()
+            ):
                 # One episode per arena; near the end of the budget, shared among workers.
                 share = -(-(cfg.episodes - issued) // self.sampler.n_live)
                 n = min(cfg.envs_per_worker, share)
@@ -433,8 +417,7 @@ class Trainer:
         cfg, c = self.cfg, self.counters
         before = c.episodes
         for episode in episodes:
-            with self.buffer_lock:
-                self.buffer.add(episode)
+            self.learning.store(episode)
             self.stored_seeds.append(episode.info["seed"])
             self.starts.record(episode.info["seed"], episode.info.get("winner") == "blue")
             self.recent.append(episode)
@@ -446,13 +429,7 @@ class Trainer:
         self.seen_restarts = self.sampler.restarts
         c.wall_seconds = self.wall_base + time.perf_counter() - self.session_start
         rounds = self._rounds_due(before, c.episodes)
-        if self.decoupled is not None:
-            self._keep_up_with_learner_thread()
-        elif rounds and len(self.buffer) >= cfg.learner.learning_starts:
-            start = time.perf_counter()
-            for _ in range(rounds):
-                self._learn_round()
-            c.learn_seconds += time.perf_counter() - start
+        if self.learning.learn(rounds, c):
             self.sampler.broadcast(self._policy())
         if self.competition.pool.snapshot_due(before, c.episodes):
             self._snapshot()
@@ -472,56 +449,6 @@ class Trainer:
         if self.hook is not None:
             self.hook(self)
 
-    def _learn_round(self) -> None:
-        """One round of updates (``learner.updates_in_round`` of them, from what is stored);
-        the targets are copied after its first update when ``learner.refreshes_targets``
-        says so for this round."""
-        lc, c = self.cfg.learner, self.counters
-        refresh = lc.refreshes_targets(c.rounds)
-        batches = prefetched(self._next_batch, lc.updates_in_round(len(self.buffer)))
-        for u, batch in enumerate(batches):
-            self.last_stats = self.learner.train(batch)
-            if refresh and u == 0:
-                self.learner.update_targets()
-        c.rounds += 1
-        c.updates, c.samples = self.learner.updates, self.learner.samples
-
-    def _next_batch(self, rng: np.random.Generator | None = None) -> Batch:
-        """A batch drawn and augmented with ``rng`` (the run's generator by default), on the
-        learner's device."""
-        rng = self.np_rng if rng is None else rng
-        with self.buffer_lock:
-            batch = self.buffer.sample(self.cfg.learner.batch_size, rng)
-        return augment(batch, self.group, rng).to(self.learner.device)
-
-    def _throttled(self) -> bool:
-        """Sampling waits: the decoupled learner lags its replay ratio."""
-        return self.decoupled is not None and self.decoupled.behind()
-
-    def _keep_up_with_learner_thread(self) -> None:
-        """Tell the learner's thread what is stored; take its counters, and send the workers
-        its weights once it has made a round's worth of updates since the last ones."""
-        thread, c, lc = self.decoupled, self.counters, self.cfg.learner
-        assert thread is not None
-        thread.stored(c.episodes - self.session_episodes)
-        thread.check()
-        c.updates, c.samples = self.learner.updates, self.learner.samples
-        c.learn_seconds = self.learn_base + thread.busy_seconds
-        self.last_stats = thread.last_stats
-        if c.updates - self.broadcast_at >= lc.updates_per_round * lc.train_every:
-            self.broadcast_at = c.updates
-            self.sampler.broadcast(self._policy())
-
-    def _stop_learner_thread(self) -> None:
-        """End the learner's thread (after its update in hand) and take its last counters."""
-        if self.decoupled is None:
-            return
-        self.decoupled.stop()
-        c = self.counters
-        c.updates, c.samples = self.learner.updates, self.learner.samples
-        c.learn_seconds = self.learn_base + self.decoupled.busy_seconds
-        self.decoupled = None
-
     def _rounds_due(self, before: int, after: int) -> int:
         if self.cfg.sync:
             return 1
@@ -538,8 +465,7 @@ class Trainer:
 
     # --- records -----------------------------------------------------------------------
     def _policy(self) -> Policy:
-        with self.learner_lock:
-            return Policy(self.spec, self.learner.acting_weights())
+        return Policy(self.spec, self.learning.acting_weights())
 
     def _train_row(self) -> dict[str, Any]:
         c, recent = self.counters, list(self.recent)
@@ -550,7 +476,7 @@ class Trainer:
             "train_win_rate": summarize(recent)["win_rate"] if recent else 0.0,
             "train_return": summarize(recent)["mean_return"] if recent else 0.0,
             "env_steps_per_s": self.session_steps / elapsed,
-            **self.last_stats,
+            **self.learning.last_stats,
         }
 
     def evaluate(
@@ -598,8 +524,7 @@ class Trainer:
         """Write the best weights as a checkpoint-format file that the match command loads
         (the learner's other state is the current one: resume from checkpoint.pt)."""
         assert self.best is not None
-        with self.learner_lock:
-            state = self.learner.state_dict()
+        state = self.learning.state_dict()
         state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
         save_checkpoint(
             self.run_dir / BEST_NAME,
@@ -626,8 +551,7 @@ class Trainer:
     def checkpoint(self, finished: bool = False) -> None:
         """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``
         (``finished``: after the final evaluation)."""
-        with self.learner_lock:
-            state = self.learner.state_dict()
+        state = self.learning.state_dict()
         save_checkpoint(
             self.run_dir / CHECKPOINT_NAME,
             config=self.cfg.to_dict(),

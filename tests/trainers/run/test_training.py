@@ -121,7 +121,7 @@ def test_sync_loop_takes_one_episode_per_worker(tmp_path: Path) -> None:
         {"learning_starts": 2, "augment": "enemies,field,allies", "start_replay": 1.0},
     )
     trainer = Trainer(cfg)
-    assert len(trainer.group) == 8
+    assert len(trainer.learning.group) == 8
     assert trainer.spec.input_dim == trainer.learner.agent.fc1.in_features
     result = trainer.run()
     assert result["counters"]["episodes"] == 4
@@ -468,7 +468,7 @@ def test_a_decoupled_learner_keeps_its_ratio_and_stores_every_episode(tmp_path: 
     seen: list[tuple[int, int, float]] = []
 
     def watch(trainer: Trainer) -> None:
-        thread = trainer.decoupled
+        thread = trainer.learning.thread
         assert thread is not None
         seen.append((trainer.counters.episodes, trainer.learner.updates, thread.target()))
 
