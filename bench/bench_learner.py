@@ -41,7 +41,7 @@ from neuronsmae.trainers.core.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.core.symmetry import augment, parse_generators, task_group
 from neuronsmae.trainers.run.config import make_config, preset
 from neuronsmae.trainers.run.config_groups import resolve_learner
-from neuronsmae.trainers.run.train import make_learner
+from neuronsmae.trainers.run.learning import make_learner
 
 TASK = {
     "n_actions": 8, "n_agents": 2, "state_shape": 21, "obs_shape": 37, "episode_limit": 50,

@@ -22,16 +22,17 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import psutil
 
-from neuronsmae.client import answering_pid
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.launch import ServerCommand, ServerProcess
 from neuronsmae.protocol.messages import MAX_ARENAS
 from neuronsmae.trainers.outputs import check_file
+
+if TYPE_CHECKING:
+    import psutil
 
 OUT = Path(__file__).resolve().parent / "out"
 MAX_PORT = 65_535
@@ -351,6 +352,8 @@ def start_server(port: int, *, arenas: int = 1, seed: int = 1234) -> ServerProce
     """An unpaced ``neuronsmae-server`` holding ``arenas`` arenas on ``port``, started as a
     client launches one (it exits with this process), ready when returned."""
     server = ServerProcess(ServerCommand(port, seed, arenas=arenas, time_scale=0.0))
+    from neuronsmae.client import answering_pid  # the client only where a server is started
+
     server.wait_ready(lambda: answering_pid(port))
     return server
 

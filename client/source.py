@@ -49,6 +49,7 @@ from gymnasium.utils import EzPickle
 
 from neuronsmae.client.spaces import Layout
 from neuronsmae.client.viewer import check_render_mode
+from neuronsmae.protocol.env_info import ARENA_OPTIONS
 from neuronsmae.protocol.errors import ForkedZenohError, InvalidOptionError, NotCopyableError
 from neuronsmae.protocol.interface import ArenaAPI, VecArenaAPI
 from neuronsmae.protocol.link import check_fork_safe
@@ -58,17 +59,6 @@ ArenaSource = ArenaAPI | Callable[[], ArenaAPI] | str | None
 """What a face wraps: an arena, a zero-argument factory of one, ``"module:attr"`` naming an
 arena class, or None for a private served arena (see the module docstring)."""
 
-ARENA_OPTIONS = frozenset(
-    {
-        "action_space", "n_blue", "n_red", "mode", "blue_level", "decision_steps",
-        "episode_steps", "k", "candidate_obs", "observability", "unseen_value",
-        "camera_hfov_deg", "vector_obs", "lidar", "lidar_range", "reward", "spawn", "zones",
-        "gui", "hit_mode", "time_limit_winner", "clip_actions", "planner_resolution",
-    }
-)  # fmt: skip
-"""The arena options (``Arena(seed, **options)``, docs/options.md); a test keeps this equal
-to the server's ``ArenaConfig`` fields, so the client can refuse an unknown option without
-importing the server or launching one."""
 RM_ARGUMENTS = frozenset(
     {"port", "no_graphics", "time_scale", "host", "launch", "timeout", "router", "busy_poll_us"}
 )

@@ -41,6 +41,17 @@ MOTION_HIGH = (V_MAX, V_MAX, W_MAX)
 """Upper bounds of a continuous action's ``(vx, vy, omega)``; the lower ones are their
 negatives."""
 ACTION_SPACES = ("abstract", "discrete", "continuous")
+ARENA_OPTIONS = frozenset(
+    {
+        "action_space", "n_blue", "n_red", "mode", "blue_level", "decision_steps",
+        "episode_steps", "k", "candidate_obs", "observability", "unseen_value",
+        "camera_hfov_deg", "vector_obs", "lidar", "lidar_range", "reward", "spawn", "zones",
+        "gui", "hit_mode", "time_limit_winner", "clip_actions", "planner_resolution",
+    }
+)  # fmt: skip
+"""The arena options (``Arena(seed, **options)``, docs/options.md); a test keeps this equal
+to the server's ``ArenaConfig`` fields, so a client or a trainer can refuse an unknown option
+without importing the server or launching one."""
 MODES = ("cooperative", "competitive", "bots")
 
 

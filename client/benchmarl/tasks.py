@@ -43,8 +43,7 @@ from torchrl.envs import EnvBase
 from torchrl.envs.libs.pettingzoo import PettingZooWrapper
 
 from neuronsmae.client.pz_env import ArenaParallelEnv, parallel_env
-from neuronsmae.client.source import ARENA_OPTIONS
-from neuronsmae.protocol.env_info import ACTION_SPACES
+from neuronsmae.protocol.env_info import ACTION_SPACES, ARENA_OPTIONS
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.protocol.levels import level_error, level_value
 

@@ -22,8 +22,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from neuronsmae.client.source import ARENA_OPTIONS
-from neuronsmae.protocol.env_info import EnvInfo
+from neuronsmae.protocol.env_info import ARENA_OPTIONS, EnvInfo
 from neuronsmae.trainers.checks import ConfigError, check_choice, check_types
 
 Q_ACTION_SPACES = ("abstract", "discrete")

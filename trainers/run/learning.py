@@ -17,13 +17,38 @@ import time
 from typing import Any
 
 import numpy as np
+import torch
 
 from neuronsmae.trainers.core.buffer import Batch, Episode, prefetched
 from neuronsmae.trainers.core.checkpoint import Counters
-from neuronsmae.trainers.core.learner import QLearner
+from neuronsmae.trainers.core.learner import (
+    AgentSpec,
+    EnvSpec,
+    QLearner,
+    resolve_device,
+)
+from neuronsmae.trainers.core.mixers import mixer_for_algorithm
 from neuronsmae.trainers.core.symmetry import augment
 from neuronsmae.trainers.run.config_groups import LearnerConfig
 from neuronsmae.trainers.run.decoupled import LearnerThread
+
+
+def make_learner(
+    env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig, device: torch.device | None = None
+) -> QLearner:
+    """The learner of algorithm ``alg`` (its mixer by name) with the ``learner`` group's
+    settings, on ``device`` (default: ``cfg.device`` resolved here)."""
+    device = resolve_device(cfg.device) if device is None else device
+    per_update = cfg.target_update_unit == "updates"
+    return QLearner(
+        env, spec, mixer_for_algorithm(alg), lr=cfg.lr, gamma=cfg.gamma,
+        grad_clip=cfg.grad_clip,
+        target_update_interval=cfg.target_update_interval if per_update else None,
+        double_q=cfg.double_q, mixer_embed=cfg.mixer_embed,
+        hypernet_hidden=cfg.hypernet_hidden, td_lambda=cfg.td_lambda,
+        hypernet_layers=cfg.hypernet_layers, mixer_state=cfg.mixer_state,
+        mask_destroyed=cfg.mask_destroyed, device=device,
+    )  # fmt: skip
 
 
 class Learning:

@@ -53,14 +53,11 @@ from neuronsmae.trainers.core.checkpoint import (
     save_checkpoint,
 )
 from neuronsmae.trainers.core.learner import (
-    AgentSpec,
     DeviceError,
     EnvSpec,
-    QLearner,
     agent_spec,
     resolve_device,
 )
-from neuronsmae.trainers.core.mixers import mixer_for_algorithm
 from neuronsmae.trainers.core.symmetry import parse_generators, task_group
 from neuronsmae.trainers.play.evaluate import summarize
 from neuronsmae.trainers.play.rollout import Request
@@ -71,13 +68,12 @@ from neuronsmae.trainers.run.config import ConfigError, TrainConfig, check_resum
 from neuronsmae.trainers.run.config_groups import (
     TEST_SEED_OFFSET,
     WIN_RULES,
-    LearnerConfig,
     resolve_learner,
 )
 from neuronsmae.trainers.run.contexts import ContextSpec
 from neuronsmae.trainers.run.experimental import StartReplay
 from neuronsmae.trainers.run.interrupt import POLL_SECONDS, StopSignals, TrainingInterrupted
-from neuronsmae.trainers.run.learning import Learning
+from neuronsmae.trainers.run.learning import Learning, make_learner
 from neuronsmae.trainers.run.placement import sampler_placement, start_ray
 from neuronsmae.trainers.run.records import Recorder, RunLock, check_new_run_dir, trim_records
 from neuronsmae.trainers.run.sampler import Sampler
@@ -89,24 +85,6 @@ log = logging.getLogger(__name__)
 
 Hook = Callable[["Trainer"], None]
 """Called after every batch of landed episodes (tests use it to inject faults)."""
-
-
-def make_learner(
-    env: EnvSpec, spec: AgentSpec, alg: str, cfg: LearnerConfig, device: torch.device | None = None
-) -> QLearner:
-    """The learner of algorithm ``alg`` (its mixer by name) with the ``learner`` group's
-    settings, on ``device`` (default: ``cfg.device`` resolved here)."""
-    device = resolve_device(cfg.device) if device is None else device
-    per_update = cfg.target_update_unit == "updates"
-    return QLearner(
-        env, spec, mixer_for_algorithm(alg), lr=cfg.lr, gamma=cfg.gamma,
-        grad_clip=cfg.grad_clip,
-        target_update_interval=cfg.target_update_interval if per_update else None,
-        double_q=cfg.double_q, mixer_embed=cfg.mixer_embed,
-        hypernet_hidden=cfg.hypernet_hidden, td_lambda=cfg.td_lambda,
-        hypernet_layers=cfg.hypernet_layers, mixer_state=cfg.mixer_state,
-        mask_destroyed=cfg.mask_destroyed, device=device,
-    )  # fmt: skip
 
 
 def train_seed(run_seed: int, k: int, eval_seed: int) -> int:
