@@ -6,7 +6,8 @@
                                   [--repeats 3] [--reference] [--out FILE]
 
 Synthetic replay of the 2 v 2 abstract task's sizes (observation 37, 8 actions, episodes of
-50 decisions; its ``get_env_info()`` is written below, so no simulator is needed).
+28–50 decisions, 39 on average as the main job's; its ``get_env_info()`` is written below,
+so no simulator is needed).
 ``defaults`` is this project's learner as ``neuronsmae-train`` resolves it for that task (a
 GRU on derived features with the points head, TD(λ) targets, the task's symmetries), at
 ``--batches`` episodes per update; ``released`` is ``--preset paper``'s (the MLP on single
@@ -50,6 +51,9 @@ TASK = {
     "candidate_obs": True, "vector_obs": True, "lidar_beams": 0,
 }  # fmt: skip
 """The default 2 v 2 abstract task's ``get_env_info()``."""
+LENGTHS = (28, 50)
+"""Episode lengths drawn uniformly in this range (decisions): a mean of 39, the main job's
+(a team can be wiped out before the 50th decision, so batches carry padding)."""
 STORED = {"episodes": 600, "transitions": 40_000}
 """Replay filled before timing: episodes, or transitions (800 episodes of 50)."""
 
@@ -77,8 +81,8 @@ class Cell:
             self.replay.add(self._episode())
 
     def _episode(self) -> Episode:
-        e, steps = self.env, self.env.episode_limit
-        rng = self.rng
+        e, rng = self.env, self.rng
+        steps = int(rng.integers(LENGTHS[0], LENGTHS[1] + 1))
         return Episode(
             obs=rng.uniform(-1, 1, (steps + 1, e.n_agents, e.obs_dim)).astype(np.float32),
             state=rng.uniform(-1, 1, (steps + 1, e.state_dim)).astype(np.float32),
