@@ -50,6 +50,20 @@ def config(learner: str, workers: int, args: argparse.Namespace, out: Path) -> A
     })  # fmt: skip
 
 
+def loopback_clusters() -> None:
+    """Keep every address of the local clusters on 127.0.0.1 and out of
+    ``/tmp/ray/ray_current_cluster``: Ray rewrites a loopback address to the machine's
+    outward IP unless "clusters" are off (a switch read once at import, set here for this
+    process and the ones the clusters start), and a plain ``ray.init()`` elsewhere would
+    join a cluster it found recorded there."""
+    from ray._private import ray_constants
+
+    os.environ[ray_constants.ENABLE_RAY_CLUSTERS_ENV_VAR] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False
+    ray._private.utils.write_ray_address = lambda *a, **k: None
+    ray._common.utils.reset_ray_address = lambda *a, **k: None
+
+
 def one_row(learner: str, workers: int, args: argparse.Namespace) -> dict[str, Any]:
     """Train once on a fresh two-node cluster; the rates of its training phase."""
     cluster = Cluster(
@@ -58,7 +72,12 @@ def one_row(learner: str, workers: int, args: argparse.Namespace) -> dict[str, A
     )
     try:
         cluster.add_node(**NODE, num_cpus=workers, resources={"sampler": workers})
-        ray.init(address=cluster.address, log_to_driver=False, logging_level=logging.WARNING)
+        ray.init(
+            address=cluster.address,
+            _node_ip_address="127.0.0.1",
+            log_to_driver=False,
+            logging_level=logging.WARNING,
+        )
         with tempfile.TemporaryDirectory(prefix="scaling-") as folder:
             start = time.perf_counter()
             result = Trainer(config(learner, workers, args, Path(folder) / "run")).run()
@@ -95,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--minutes must be > 0, got {args.minutes}")
     if (problem := out_problem(args.out, args.force)) is not None:
         p.error(problem)
+    loopback_clusters()
     learners = list(args.learners) + (["decoupled"] if args.decoupled else [])
     rows = []
     for learner in learners:
