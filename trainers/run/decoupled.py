@@ -51,6 +51,9 @@ class LearnerThread:
         self.base = learner.updates
         """The learner's updates when the thread began (a resumed run's are not due again)."""
         self._wake = threading.Condition()
+        """Wakes the thread when episodes are stored or it is to stop."""
+        self._progress = threading.Condition()
+        """Wakes a driver waiting for the thread to catch up (:meth:`catch_up`)."""
         self._stored = 0
         self._stop = False
         self.error: BaseException | None = None
@@ -97,6 +100,16 @@ class LearnerThread:
             self._thread.join()
         self.check()
 
+    def catch_up(self, timeout: float) -> None:
+        """Block until the learner is no longer :meth:`behind` (or has failed, or
+        ``timeout`` seconds pass): the driver waits here instead of polling, since a busy
+        driver thread would take the interpreter from the learner's between its kernels."""
+        with self._progress:
+            self._progress.wait_for(
+                lambda: not self.behind() or self.error is not None or not self._thread.is_alive(),
+                timeout,
+            )
+
     def check(self) -> None:
         """Re-raise in the driver whatever ended the learner thread."""
         if self.error is not None:
@@ -111,8 +124,12 @@ class LearnerThread:
                 with self.lock:
                     self.last_stats = self.learner.train(batch)
                 self.busy_seconds += time.perf_counter() - start
+                with self._progress:
+                    self._progress.notify_all()
         except BaseException as exc:  # handed to the driver by check()
             self.error = exc
+            with self._progress:
+                self._progress.notify_all()
 
     def _next(self) -> bool:
         """Wait until an update is due (True) or the thread is to stop (False)."""

@@ -114,6 +114,11 @@ class Learning:
         """Sampling waits: the decoupled learner lags its replay ratio."""
         return self.thread is not None and self.thread.behind()
 
+    def catch_up(self, timeout: float) -> None:
+        """Wait (without polling) for a lagging decoupled learner, at most ``timeout``."""
+        if self.thread is not None and self.thread.behind():
+            self.thread.catch_up(timeout)
+
     def check(self) -> None:
         """Re-raise what stopped the decoupled learner, if anything did."""
         if self.thread is not None:

@@ -370,6 +370,8 @@ class Trainer:
             landed = self.sampler.wait(timeout=wait)
             if landed:
                 self._absorb(landed)
+            elif not self.sampler.in_flight:  # nothing out: the learner is what lags
+                self.learning.catch_up(wait)
 
     def _run_sync(self) -> None:
         while self._more():

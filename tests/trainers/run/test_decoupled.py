@@ -96,3 +96,21 @@ def test_a_failing_update_reaches_the_driver() -> None:
         thread.check()
     with pytest.raises(RuntimeError):
         thread.stop()
+
+
+def test_a_driver_waiting_for_a_lagging_learner_blocks_instead_of_polling() -> None:
+    learner = FakeLearner(seconds=0.005)
+    thread = _thread(learner, ratio=1.0, starts=0)
+    thread.start()
+    try:
+        thread.stored(40)  # 40 due, 4 of slack: behind until 36
+        assert thread.behind()
+        start = time.perf_counter()
+        thread.catch_up(5.0)
+        assert not thread.behind() and learner.updates >= 36
+        assert time.perf_counter() - start < 2.0
+        start = time.perf_counter()
+        thread.catch_up(5.0)  # not behind: returns at once
+        assert time.perf_counter() - start < 0.1
+    finally:
+        thread.stop()

@@ -494,3 +494,28 @@ def test_a_decoupled_learner_keeps_its_ratio_and_stores_every_episode(tmp_path: 
     for _, updates, target in seen:  # never ahead of the ratio by more than its slack
         assert updates <= target + max(2.0, 0.1 * target) + 1
     assert counters["updates"] <= 2.0 * (24 - 4) * 1.1 + 2
+
+
+def test_a_decoupled_learner_that_lags_keeps_up_with_a_throttled_driver(tmp_path: Path) -> None:
+    """A ratio the learner cannot keep up with pauses sampling; the driver then waits for the
+    learner instead of polling (a polling driver thread starved the learner's of the
+    interpreter, and a 30-minute run made 366 updates)."""
+    cfg = make_config(
+        {k: v for k, v in (kv.split("=") for kv in TINY)},
+        {"alg": "vdn", "episodes": 24, "workers": 2, "env": "inprocess", "out": str(tmp_path),
+         "progress": False, "eval.eval_every": 0, "learner.replay_ratio": 20.0},
+    )  # fmt: skip
+    trainer = Trainer(cfg)
+    real, polls = trainer.sampler.wait, [0]
+
+    def counted(*args: object, **kwargs: object) -> list[Episode]:
+        polls[0] += 1
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    trainer.sampler.wait = counted  # type: ignore[method-assign]
+    start = time.perf_counter()
+    counters = trainer.run()["counters"]
+    seconds = time.perf_counter() - start
+    assert counters["episodes"] == 24
+    assert counters["updates"] >= 0.7 * 20.0 * (24 - 4)  # kept pace within its tolerance
+    assert polls[0] < 50 * seconds + 100  # waited on the learner, never spun on the sampler
