@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.common import at_least, non_negative
+from bench.common import at_least, commit, non_negative
 from neuronsmae.protocol.errors import InvalidOptionError
 from neuronsmae.trainers.core.mixers import ALGORITHMS
 from neuronsmae.trainers.outputs import check_folder
@@ -189,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
         "start_replays": result["start_replays"],
         "total_seconds": total,
         "target": {**TARGET, "met": met},
+        "commit": commit(),
         "machine": {
             "cpus": os.cpu_count(),
             "python": platform.python_version(),

@@ -156,11 +156,16 @@ def compute(records: list[dict[str, Any]], learner: str, cells: int) -> str:
     """What the recorded runs of ``learner`` took."""
     done = [r for r in records if r["learner"] == learner]
     hours = sum(r["wall_minutes"] for r in done) / 60
+    # Records written before the runs counted their sampled transitions say nothing of them.
+    samples = (
+        f" on {sum(r['samples'] for r in done) / 1e6:.0f} million sampled transitions"
+        if done and all("samples" in r for r in done)
+        else ""
+    )
     return (
         f"{learner}: {len(done)} of {cells} runs recorded, {sum(r['episodes'] for r in done):,} "
         f"training episodes ({sum(r['env_steps'] for r in done) / 1e6:.1f} million decisions), "
-        f"{sum(r['updates'] for r in done):,} gradient updates on "
-        f"{sum(r.get('samples', 0) for r in done) / 1e6:.0f} million sampled transitions, "
+        f"{sum(r['updates'] for r in done):,} gradient updates{samples}, "
         f"{hours:.1f} h of wall time (training and tests)."
     )
 

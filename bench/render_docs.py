@@ -770,15 +770,16 @@ def decoupled(data: Data) -> str:
     srcs = _present(data, "decoupled")
     if not srcs:
         return "Not measured yet."
-    head = ("loop", "seed", "training episodes", "updates", "learner's share of the wall time",
-            "test win rate (final weights)")  # fmt: skip
+    head = ("loop", "seed", "commit", "training episodes", "updates",
+            "learner's share of the wall time", "test win rate (final weights)")  # fmt: skip
     body = []
     for src in srcs:
         run = data.load(src["file"])
         c = run["counters"]
         ratio = run["config"]["learner"].get("replay_ratio", 0.0)
         loop = f"decoupled (replay ratio {ratio:g})" if ratio > 0 else "inline (2 per episode)"
-        body.append((loop, str(run["seed"]), count(c["episodes"]), count(c["updates"]),
+        body.append((loop, str(run["seed"]), src.get("commit", "—")[:7],
+                     count(c["episodes"]), count(c["updates"]),
                      f"{c.get('learn_seconds', 0.0) / c['wall_seconds']:.2f}",
                      rate(run["final"]["win_rate"])))  # fmt: skip
     return "\n".join([*table(head, body), "", measured(data, srcs)])

@@ -63,6 +63,11 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     assert "paper: 4 of 33 runs recorded, 120,000 training episodes (5.9 million" in compute
     assert "1,120,000 gradient updates on 2240 million sampled transitions, 2.0 h" in compute
     assert "defaults: 1 of 9 runs recorded" in compute
+    # A record written before runs counted their sampled transitions claims none of them.
+    del records[-1]["samples"]
+    compute = report({"records": records}).split("Compute:")[1]
+    assert "defaults: 1 of 9 runs recorded" in compute
+    assert "280,000 gradient updates, 0.5 h" in compute
     assert "This project's learner" not in report({"records": records[:4]})
 
 

@@ -97,3 +97,25 @@ def test_readme_quotes_the_main_jobs_figure_and_stays_short() -> None:
     assert headline() in readme, f"README.md's headline figure should read {headline()!r}"
     assert len(readme.splitlines()) <= 150
     assert not re.search(r"µs|\bVM\b", readme)
+
+
+def _main_job(seed: int, replay_ratio: float, episodes: int, learn: float, rate: float) -> dict:
+    counters = {"episodes": episodes, "updates": 2 * episodes, "learn_seconds": learn,
+                "wall_seconds": 1800.0}  # fmt: skip
+    return {"seed": seed, "config": {"learner": {"replay_ratio": replay_ratio}},
+            "counters": counters, "final": {"win_rate": rate}}  # fmt: skip
+
+
+def test_decoupled_names_each_runs_loop_seed_commit_and_learners_share(tmp_path: Path) -> None:
+    root = _tree(tmp_path, "{{decoupled}}\n")
+    index = json.loads((root / "docs/data/tables.json").read_text())
+    runs = {"inline_s1.json": _main_job(1, 0.0, 9352, 1746.0, 0.925),
+            "decoupled_s1.json": _main_job(1, 2.0, 10_000, 1710.0, 0.9)}  # fmt: skip
+    for name, run in runs.items():
+        (root / "docs/data" / name).write_text(json.dumps(run))
+        source = {"file": name, "command": "python -m bench.bench_learning", "machine": "today"}
+        index["tables"]["decoupled"]["sources"].append({**source, "commit": "ff1a5701234"})
+    (root / "docs/data/tables.json").write_text(json.dumps(index))
+    rows = [line for line in render("results.md", root).splitlines() if line.startswith("| ")]
+    assert rows[1] == "| inline (2 per episode) | 1 | ff1a570 | 9,352 | 18,704 | 0.97 | 0.925 |"
+    assert rows[2].startswith("| decoupled (replay ratio 2) | 1 | ff1a570 | 10,000 | 20,000 | 0.95")

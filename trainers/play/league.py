@@ -38,7 +38,7 @@ import numpy as np
 from neuronsmae.protocol.errors import InvalidOptionError, NeuronsMAEError
 from neuronsmae.protocol.levels import LEVEL_ARGS
 from neuronsmae.trainers.outputs import check_folder
-from neuronsmae.trainers.play.match import Side, parse_option, play
+from neuronsmae.trainers.play.match import Side, add_arena_arguments, play
 
 SNAPSHOTS = "snapshots"
 CHECKPOINT = "checkpoint.pt"
@@ -214,15 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bots", default="easy,middle,hard",
                    help="comma list of bot levels; '' for none (easy,middle,hard)")  # fmt: skip
     p.add_argument("--games", type=int, default=20, help="episodes per pair, half each colour")
-    p.add_argument("--seed", type=int, default=0,
-                   help="first episode seed, then +1 per episode (0); for trained checkpoints, "
-                   "seeds their runs never trained on, e.g. 1010000000")  # fmt: skip
-    p.add_argument("--arenas", type=int, default=8, help="arenas played at once (8)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--port", type=int, nargs="+", help="play on the server(s) at these ports")
-    where.add_argument("--servers", type=int, help="play on this many private servers")
-    p.add_argument("--option", type=parse_option, action="append", default=[],
-                   metavar="KEY=VALUE", help="an arena option, repeatable")  # fmt: skip
+    add_arena_arguments(p)
     p.add_argument("--out", type=Path,
                    help="write league.json, league.md and league.png into this folder, which "
                    "must not hold them already")  # fmt: skip

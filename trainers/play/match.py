@@ -362,12 +362,10 @@ def parse_option(text: str) -> tuple[str, Any]:
     return key, value
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="neuronsmae-match", description=__doc__.split("\n")[0])
-    side = f"a bot level {list(LEVEL_ARGS)}, or a checkpoint file or run directory"
-    p.add_argument("--blue", default="hard", help=side)
-    p.add_argument("--red", default="easy", help=side)
-    p.add_argument("--episodes", type=int, default=200)
+def add_arena_arguments(p: argparse.ArgumentParser) -> None:
+    """The options ``neuronsmae-match`` and ``neuronsmae-league`` share: the first episode
+    seed, arenas at once, where to play (servers at ports, or private ones) and the arena
+    options."""
     p.add_argument("--seed", type=int, default=0,
                    help="first episode seed, then +1 per episode (0); for trained checkpoints, "
                    "seeds their runs never trained on, e.g. 1010000000")  # fmt: skip
@@ -379,6 +377,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--option", type=parse_option, action="append", default=[], metavar="KEY=VALUE",
         help="an arena option (docs/options.md), e.g. n_blue=3; repeatable",
     )  # fmt: skip
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="neuronsmae-match", description=__doc__.split("\n")[0])
+    side = f"a bot level {list(LEVEL_ARGS)}, or a checkpoint file or run directory"
+    p.add_argument("--blue", default="hard", help=side)
+    p.add_argument("--red", default="easy", help=side)
+    p.add_argument("--episodes", type=int, default=200)
+    add_arena_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
         "--record", type=Path, metavar="DIR",
