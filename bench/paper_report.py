@@ -190,14 +190,27 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
     return "\n".join(lines + retests(records))
 
 
+def _contexts(key: str) -> str:
+    """A ``--test-at`` key as a header: ``coef=0.5;Friction_coeff=0.3`` → ``coef 0.5,
+    Friction_coeff 0.3``."""
+    return ", ".join(part.replace("=", " ") for part in key.split(";"))
+
+
 def retests(records: list[dict[str, Any]]) -> list[str]:
     """A table for the tests added by ``--test-at`` (none: no lines)."""
     done = [r for r in records if r["learner"] == "paper"]
     extra = sorted({k for r in done for k in r["test"]} - {"main", "coef=1.0"})
     if not extra:
         return []
-    head = " | ".join(f"released rule, {k}" for k in extra)
-    lines = ["", f"| level | alg | released rule, coef 1.5 | {head} |"]
+    head = " | ".join(f"released rule, {_contexts(k)}" for k in extra)
+    lines = [
+        "",
+        "The recorded runs' final weights tested again on the same 200 held-out episodes at "
+        "other contexts (`python -m bench.paper_table --test-at KEY=VALUE`; coef 0.5 is where "
+        "they trained):",
+        "",
+        f"| level | alg | released rule, coef 1.5 | {head} |",
+    ]
     lines.append("|---|---|---|" + "---|" * len(extra))
     for level, alg in _cells():
         runs = runs_of(done, alg, level, "paper")

@@ -98,7 +98,7 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
     assert "coef=0.5" not in report({"records": records})
     records[0]["test"]["coef=0.5"] = {"released_win_rate": 1.0}
     lines = report({"records": records}).splitlines()
-    head = "| level | alg | released rule, coef 1.5 | released rule, coef=0.5 |"
+    head = "| level | alg | released rule, coef 1.5 | released rule, coef 0.5 |"
     assert head in lines
     row = next(line for line in lines[-11:] if line.startswith("| easy | VDN"))
     assert row.split("|")[3].strip().startswith("0.350 ±")  # both seeds at coef 1.5
