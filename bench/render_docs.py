@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import statistics
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from functools import cached_property
@@ -313,8 +314,11 @@ def benchmarl_table(records: Sequence[dict[str, Any]]) -> list[str]:
         mean, half = interval(rates)
         both = f"{mean:.3f}" if half is None else f"{mean:.3f} ± {half:.3f}"
         each = ", ".join(f"s{r['seed']} {_win_rate(r):.3f}" for r in runs)
-        rows.append((task, alg, str(len(runs)), both, f"{_iqm(rates):.3f}", each))
-    head = ("task", "algorithm", "seeds", "test win rate, mean ± 95 %", "IQM", "each seed")
+        frames = [r["frames"] for r in runs if "frames" in r]
+        trained = count(round(statistics.fmean(frames))) if frames else "—"
+        rows.append((task, alg, str(len(runs)), both, f"{_iqm(rates):.3f}", each, trained))
+    head = ("task", "algorithm", "seeds", "test win rate, mean ± 95 %", "IQM", "each seed",
+            "frames trained (mean)")  # fmt: skip
     return table(head, rows)
 
 

@@ -72,7 +72,8 @@ def test_an_unknown_placeholder_is_an_error(tmp_path: Path) -> None:
 
 
 def _record(alg: str, task: str, seed: int, rate: float) -> dict:
-    return {"algorithm": alg, "task": task, "seed": seed, "test": {"win_rate": rate}}
+    return {"algorithm": alg, "task": task, "seed": seed, "test": {"win_rate": rate},
+            "frames": 100_000 * seed}  # fmt: skip
 
 
 def test_benchmarl_renders_mean_interval_and_iqm_per_algorithm_and_task(tmp_path: Path) -> None:
@@ -83,7 +84,8 @@ def test_benchmarl_renders_mean_interval_and_iqm_per_algorithm_and_task(tmp_path
     # mean 0.56, t(0.975, 4) · stdev / √5 = 2.7764 · 0.2966 / 2.2361 = 0.368; the IQM drops
     # one of five from each end (rliable's 25 % trimmed mean): (0.5 + 0.6 + 0.7) / 3 = 0.6
     assert "| 5 | 0.560 ± 0.368 | 0.600 | s1 0.100, s2 0.500" in rows["mappo"]
-    assert "| 1 | 0.400 | 0.400 | s1 0.400 |" in rows["ippo"]
+    assert rows["mappo"].endswith("s5 0.900 | 300,000 |")  # frames trained, mean over seeds
+    assert "| 1 | 0.400 | 0.400 | s1 0.400 | — |" in rows["ippo"]  # a record without frames
     root = _tree(tmp_path, "{{benchmarl}}\n")
     data = {"command": "python -m bench.benchmarl", "machine": "an H200", "records": records}
     (root / "docs/data/benchmarl_baselines.json").write_text(json.dumps(data))
