@@ -732,20 +732,32 @@ def learner(data: Data) -> str:
     if not srcs:
         return "Not measured yet."
     rows = [row for src in srcs for row in data.load(src["file"])["rows"]]
-    head = ("learner", "alg", "batch", "device", "threads", "ms per update", "updates/s",
-            "transitions/s", "before: ms per update", "speedup")  # fmt: skip
+    threads = sorted({r["threads"] or 0 for r in rows})
+    cells: dict[tuple[str, str, int, str], dict[int, dict[str, Any]]] = {}
+    for r in rows:  # one line per learner, batch and device; a column per thread count
+        cells.setdefault((r["learner"], r["alg"], r["batch"], r["device"]), {})[
+            r["threads"] or 0
+        ] = r
+
+    def ms(r: dict[str, Any] | None) -> str:
+        if r is None:
+            return "—"
+        gain = f" ({r['speedup']:.2f}×)" if "speedup" in r else ""
+        return f"{r['new']['ms_per_update']:.1f}{gain}"
+
+    head = ("learner", "alg", "batch", "device",
+            *(f"ms per update, {t or '—'} thread{'s' if t != 1 else ''} (speedup)"
+              for t in threads),
+            "transitions/s, most threads")  # fmt: skip
     body = [
-        (r["learner"], r["alg"].upper(), count(r["batch"]), r["device"], str(r["threads"] or "—"),
-         f"{r['new']['ms_per_update']:.1f}", f"{r['new']['updates_per_s']:.1f}",
-         count(r["new"]["transitions_per_s"]),
-         f"{r['reference']['ms_per_update']:.1f}" if "reference" in r else "—",
-         f"{r['speedup']:.2f}" if "speedup" in r else "—")
-        for r in rows
+        (learner_, alg.upper(), count(batch), device, *(ms(by.get(t)) for t in threads),
+         count(by[max(by)]["new"]["transitions_per_s"]))
+        for (learner_, alg, batch, device), by in cells.items()
     ]  # fmt: skip
     about = ("Batch: episodes for the defaults' learner, transitions for the released one. "
-             "Medians of the repeats; *before* is the step as it was before the faster "
-             "learner (the λ-returns by a loop over time steps, batches drawn inline), timed "
-             "in the same repeats.")  # fmt: skip
+             "Medians of the repeats; the speedup is over the step as it was before the "
+             "faster learner (the λ-returns by a loop over time steps, batches drawn inline), "
+             "timed in the same repeats.")  # fmt: skip
     return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
 
 
