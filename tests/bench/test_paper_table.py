@@ -69,7 +69,7 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     (line,) = json.loads(out.read_text())["records"]
     assert line["test"]["coef=1.5"] == line["test"]["main"]
     assert main([*args, "--report"]) == 0
-    head = "| level | alg | released rule, coef 1.5 | released rule, coef=1.5 |"
+    head = "| level | alg | released rule, coef 1.5 | released rule, coef 1.5 |"
     assert head in capsys.readouterr().out
 
 
