@@ -18,8 +18,9 @@ the table gives the median ms per update, updates/s and transitions drawn per se
 (padding not counted). A batch is drawn, augmented and sent to the device as the trainer does
 it (in a background thread while the previous update runs). ``--reference`` also times the
 step as it was before the faster learner (the λ-returns by a Python loop over time steps,
-each batch drawn inline) in the same repeats, interleaved, and reports the ratio. CPU cells
-run with ``torch.set_num_threads(t)``; CUDA cells only where torch sees a device.
+the points head's first form, each batch drawn inline) in the same repeats, interleaved,
+and reports the ratio. CPU cells run with ``torch.set_num_threads(t)``; CUDA cells only
+where torch sees a device.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import torch
 from bench.common import Distinct, add_out, at_least, machine, out_problem, table, write_json
 from bench.common import write_out as write_to
 from neuronsmae.protocol.env_info import EnvInfo
+from neuronsmae.trainers.core import agent as agent_module
 from neuronsmae.trainers.core import learner as learner_module
 from neuronsmae.trainers.core.buffer import REPLAYS, Batch, Episode, prefetched
 from neuronsmae.trainers.core.learner import EnvSpec, QLearner, agent_spec
@@ -100,11 +102,13 @@ class Cell:
 
     def timed(self, updates: int, reference: bool) -> tuple[float, int]:
         """Seconds for ``updates`` updates, and the transitions they drew. ``reference``: the
-        step before the faster learner (λ-return loop, batches drawn inline)."""
+        step before the faster learner (λ-return loop, the points head's first form, batches
+        drawn inline)."""
         learner = self.learner
-        fast = learner_module.lambda_returns
+        fast, fast_head = learner_module.lambda_returns, agent_module._QNetwork._score_points
         if reference:
             learner_module.lambda_returns = learner_module.lambda_returns_loop
+            agent_module._QNetwork._score_points = agent_module.score_points_sum  # type: ignore[method-assign]
         try:
             before = learner.samples
             self._sync()
@@ -119,6 +123,7 @@ class Cell:
             return time.perf_counter() - start, learner.samples - before
         finally:
             learner_module.lambda_returns = fast
+            agent_module._QNetwork._score_points = fast_head  # type: ignore[method-assign]
 
     def _sync(self) -> None:
         if self.learner.device.type == "cuda":

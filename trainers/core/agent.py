@@ -124,13 +124,29 @@ class _QNetwork(nn.Module):
         ``out [B, T, H]`` is shared by the A actions, so the first layer's product with it is
         taken once per step and broadcast, instead of once per action on a concatenated
         ``[B, T, A, H + F]`` tensor: the same function and parameters at about a ninth of the
-        cost of the largest matrix product of an update.
+        cost of the largest matrix product of an update. The ``[B, T, A, head_hidden]``
+        activations, the largest tensors of an update, are written once: the broadcast sum
+        and the ReLU in place (neither product's gradient reads them), and the last layer
+        (one output) as a product with its weight vector, whose gradient is a broadcast
+        product rather than a matrix product with an inner size of one.
         """
         assert self.point_head is not None
-        first, act, last = self.point_head
+        first, _, last = self.point_head  # Linear, ReLU, Linear(head_hidden, 1)
         w_out, w_act = first.weight.split([self.hidden_dim, per_action.shape[-1]], dim=1)
-        pre = F.linear(out, w_out, first.bias).unsqueeze(-2) + F.linear(per_action, w_act)
-        return last(act(pre)).squeeze(-1)
+        pre = F.linear(per_action, w_act)
+        pre += F.linear(out, w_out, first.bias).unsqueeze(-2)
+        return torch.matmul(torch.relu_(pre), last.weight[0]) + last.bias[0]
+
+
+def score_points_sum(self: _QNetwork, out: torch.Tensor, per_action: torch.Tensor) -> torch.Tensor:
+    """:meth:`_QNetwork._score_points` as first written (a new broadcast sum, the ReLU
+    module and the last ``Linear``): the same function and gradients, kept for the tests and
+    ``bench.bench_learner --reference``, which compare the faster form with it."""
+    assert self.point_head is not None
+    first, act, last = self.point_head
+    w_out, w_act = first.weight.split([self.hidden_dim, per_action.shape[-1]], dim=1)
+    pre = F.linear(out, w_out, first.bias).unsqueeze(-2) + F.linear(per_action, w_act)
+    return last(act(pre)).squeeze(-1)
 
 
 class RNNAgent(_QNetwork):

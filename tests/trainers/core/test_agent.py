@@ -9,14 +9,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from neuronsmae.trainers.core.agent import (
+    MLPAgent,
     PolicyInputError,
     RNNAgent,
+    _QNetwork,
     action_mask,
     build_inputs,
     epsilon_at,
     epsilon_greedy,
     masked_greedy,
     observations,
+    score_points_sum,
 )
 
 
@@ -139,3 +142,30 @@ def test_epsilon_schedule() -> None:
     assert epsilon_at(0, 0.2, 0.05, 100) == pytest.approx(0.2)
     assert epsilon_at(50, 0.2, 0.05, 100) == pytest.approx(0.125)
     assert epsilon_at(500, 0.2, 0.05, 100) == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize("network", [RNNAgent, MLPAgent])
+def test_the_points_head_has_its_first_forms_values_and_gradients(
+    network: type[RNNAgent | MLPAgent], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The in-place points head (the learner's hot path) and the form it replaced
+    (:func:`score_points_sum`) give the same Q-values and the same gradients of every
+    parameter and of the input."""
+    index = torch.tensor([[0, 1, 5], [2, 3, 5], [4, 0, 6], [1, 2, 6]])  # 4 actions, 3 columns
+
+    def run(form: object) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        monkeypatch.setattr(_QNetwork, "_score_points", form)
+        torch.manual_seed(0)
+        agent = network(9, 4, 16, action_index=index, head_hidden=8)
+        x = torch.randn(5, 6, 9, requires_grad=True)
+        q, _ = agent(x, agent.initial_hidden(5))
+        (q * torch.linspace(-1, 1, q.numel()).view_as(q)).sum().backward()
+        assert x.grad is not None
+        return q.detach(), [x.grad, *(p.grad for p in agent.parameters() if p.grad is not None)]
+
+    fast_q, fast_grads = run(_QNetwork._score_points)
+    first_q, first_grads = run(score_points_sum)
+    assert torch.allclose(fast_q, first_q, rtol=1e-5, atol=1e-6)
+    assert len(fast_grads) == len(first_grads) == 1 + len(list(network(9, 4, 16).parameters())) + 4
+    for a, b in zip(fast_grads, first_grads, strict=True):
+        assert torch.allclose(a, b, rtol=1e-4, atol=1e-6)
