@@ -22,9 +22,13 @@ ALGS = ("iql", "vdn", "qmix")
 LEVELS = ("easy", "middle", "hard")
 RELEASED = ("0", "1")
 """The released build's levels, the rows of run_dr.sh (VDN only)."""
-LEARNERS = ("paper", "defaults", "defaults_released")
+LEARNERS = ("paper", "defaults", "defaults_released", "paper_dr")
 """``paper``: ``--preset paper``; ``defaults``: this project's learner at its own contexts;
-``defaults_released``: the same learner trained and tested at the released contexts."""
+``defaults_released``: the same learner trained and tested at the released contexts;
+``paper_dr``: ``--preset paper`` trained with the released ``--dr_coef`` (coef drawn per
+episode from {0.5, 0.7, 1, 1.4, 1.7, 2}; run_dr.sh), tested as ``paper``."""
+PROJECT = ("defaults", "defaults_released")
+"""The learners of the project's table."""
 TEST_FIELDS = ("win_rate", "draw_rate", "loss_rate", "released_win_rate", "mean_return")
 """What a record keeps of each test, beside its episode count."""
 RELEASED_TEST = "main"
@@ -108,7 +112,7 @@ def project_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
         "trained at μ 0.5, coef 0.5; released rule, coef 1.5 |",
         "|---|---|---|---|---|---|",
     ]
-    algs = [a for a in ALGS if any(r["alg"] == a and r["learner"] != "paper" for r in records)]
+    algs = [a for a in ALGS if any(r["alg"] == a and r["learner"] in PROJECT for r in records)]
     for level in LEVELS:
         for alg in algs:
             own = runs_of(records, alg, level, "defaults")
@@ -126,6 +130,29 @@ def _mean(records: list[dict[str, Any]], alg: str, level: str) -> float | None:
     if not runs:
         return None
     return statistics.fmean(r["test"][RELEASED_TEST]["released_win_rate"] for r in runs)
+
+
+def dr_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
+    """``--preset paper`` trained with ``--dr_coef`` beside the same cell trained at coef 0.5
+    (its rows: the cells with a ``paper_dr`` run), both tested as released."""
+    lines = [
+        "| level | alg | trained at coef 0.5: released rule, coef 1.5 | trained at coef 0.5–2 "
+        "(`--dr_coef`): released rule, coef 1.5 | `--dr_coef`: referee win / draw / loss, "
+        "coef 1.5 | `--dr_coef`: released rule, coef 1.0 |",
+        "|---|---|---|---|---|---|",
+    ]
+    for level, alg in _cells():
+        dr = runs_of(records, alg, level, "paper_dr")
+        if not dr:
+            continue
+        fixed = runs_of(records, alg, level, "paper")
+        lines.append(
+            f"| {level} | {alg.upper()} | "
+            f"{cell(fixed, RELEASED_TEST, seeds, 'released_win_rate')} | "
+            f"{cell(dr, RELEASED_TEST, seeds, 'released_win_rate')} | "
+            f"{outcomes(dr, RELEASED_TEST)} | {cell(dr, 'coef=1.0', seeds, 'released_win_rate')} |"
+        )
+    return lines
 
 
 def shape(records: list[dict[str, Any]]) -> list[str]:
@@ -179,14 +206,21 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
     if order:
         lines += ["", "The paper's orderings in these means (released rule, coef 1.5):", ""]
         lines += order
-    if any(r["learner"] != "paper" for r in records):
+    if any(r["learner"] == "paper_dr" for r in records):
+        lines += ["", "`--preset paper` trained with the released `--dr_coef` (coef drawn per "
+                  "episode from {0.5, 0.7, 1, 1.4, 1.7, 2}), 30,000 episodes:", ""]  # fmt: skip
+        lines += dr_table(records, seeds)
+    if any(r["learner"] in PROJECT for r in records):
         lines += ["", "This project's learner, 30 minutes a run:", ""]
         lines += project_table(records, seeds)
     lines += ["", "Compute:", ""]
     lines.append("- " + compute(records, "paper", len(_cells()) * seeds))
-    for learner in LEARNERS[1:]:
+    for learner in PROJECT:
         if any(r["learner"] == learner for r in records):
             lines.append("- " + compute(records, learner, len(LEVELS) * seeds))
+    dr_runs = {(r["alg"], r["level"], r["seed"]) for r in records if r["learner"] == "paper_dr"}
+    if dr_runs:
+        lines.append("- " + compute(records, "paper_dr", len(dr_runs)))
     return "\n".join(lines + retests(records))
 
 

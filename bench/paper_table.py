@@ -1,6 +1,6 @@
 """The paper's table, measured: IQL, VDN, QMIX × easy, middle, hard × seeds, resumable.
 
-    python -m bench.paper_table [--learner paper|defaults|defaults_released]
+    python -m bench.paper_table [--learner paper|defaults|defaults_released|paper_dr]
                                 [--algs ...] [--levels easy middle hard 0 1] [--seeds 1 2 3]
                                 [--runs runs/table] [--out docs/data/paper_table.json]
                                 [--report | --test-at KEY=VALUE;...]
@@ -13,8 +13,10 @@ defaults`` trains with this project's own learner under a 30-minute budget (VDN 
 default: ``--algs vdn``) at its default contexts, tested at coef 1.0 and 1.5;
 ``--learner defaults_released`` is the like-for-like row: the same learner trained at the
 released contexts (μ 0.5, coef 0.5) and tested as released (coef 1.5, the released win
-rule; coef 1.0 beside it). Levels are the paper's bots and the released build's levels
-``0`` and ``1``.
+rule; coef 1.0 beside it). ``--learner paper_dr`` is ``--preset paper`` trained with the
+released ``--dr_coef`` (coef drawn per episode from {0.5, 0.7, 1, 1.4, 1.7, 2}; VDN by
+default, as run_dr.sh), tested as ``paper``. Levels are the paper's bots and the released
+build's levels ``0`` and ``1``.
 
 Cells run one at a time, seed-major (every cell's first seed before any second seed), so a
 partial table covers every cell early. Each run has its own directory under ``--runs``; a
@@ -82,6 +84,11 @@ a layer of its own): tested at coef 1.5 beside its own coef 1.0, or trained and 
 the released contexts with the released win rule (the like-for-like row)."""
 
 
+DR_COEF_CONTEXTS = "Friction_coeff=0.5;coef=0.5,0.7,1,1.4,1.7,2"
+"""``--learner paper_dr``'s training contexts: the released ``--dr_coef`` (run_dr.sh), coef
+drawn per episode from the released list (common/arguments.py), μ 0.5 as in the preset."""
+
+
 def cell_config(
     args: argparse.Namespace, alg: str, level: str, seed: int, run_dir: Path
 ) -> TrainConfig:
@@ -89,6 +96,8 @@ def cell_config(
     layers: list[dict[str, Any]] = []
     if args.learner == "paper":
         layers.append(preset("paper"))
+    elif args.learner == "paper_dr":
+        layers += [preset("paper"), {"contexts": DR_COEF_CONTEXTS}]
     else:
         layers.append({"max_minutes": args.minutes, **LEARNER_LAYERS[args.learner]})
     layers.append(
@@ -159,7 +168,7 @@ def record(
         "alg": alg,
         "level": level,
         "learner": args.learner,
-        "preset": "paper" if args.learner == "paper" else None,
+        "preset": "paper" if args.learner in ("paper", "paper_dr") else None,
         "seed": seed,
         "episodes": counters["episodes"],
         "env_steps": counters["env_steps"],
@@ -359,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
         table = load(args.out)
         print(report(table, _seed_count(table, args.seeds)))
         return 0
-    algs = args.algs or (list(ALGS) if args.learner == "paper" else ["vdn"])
+    algs = args.algs or (list(ALGS) if args.learner == "paper" else ["vdn"])  # run_dr.sh: VDN
     table = load(args.out)
     for seed in args.seeds:
         for level in args.levels:

@@ -10,12 +10,13 @@ from typing import Any
 import pytest
 
 from bench.paper_report import interval, report
-from bench.paper_table import main, set_aside
+from bench.paper_table import DR_COEF_CONTEXTS, cell_config, main, set_aside
 
 
 def _record(alg: str, level: str, seed: int, rate: float, learner: str = "paper") -> dict:
     test: dict[str, Any] = {}
-    if learner == "paper":  # coef 1.5 (main) and coef 1.0, the released rule beside the referee
+    if learner in ("paper", "paper_dr"):  # coef 1.5 (main) and coef 1.0, the released rule
+        # beside the referee
         test["main"] = {"released_win_rate": rate / 2, "win_rate": rate / 2,
                         "draw_rate": 0.0, "loss_rate": 1 - rate / 2}  # fmt: skip
         test["coef=1.0"] = {"released_win_rate": rate, "win_rate": rate}
@@ -141,3 +142,37 @@ def test_test_at_is_checked_before_anything_runs(
         main([*argv, "--out", str(tmp_path / "t.json"), "--runs", str(tmp_path / "runs")])
     assert stop.value.code == 2 and said in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+def test_the_dr_coef_variant_has_its_own_rows_beside_the_fixed_coef_cells() -> None:
+    records = [_record("vdn", "easy", 1, 0.4), _record("vdn", "easy", 1, 0.8, "paper_dr")]
+    records.append(_record("vdn", "1", 1, 0.6, "paper_dr"))
+    text = report({"records": records})
+    assert "This project's learner" not in text  # paper_dr is the paper preset's variant
+    dr = _rows(text.split("`--dr_coef` (coef drawn")[1].split("Compute")[0])
+    assert list(dr) == [("easy", "VDN"), ("1", "VDN")]  # only the cells it ran
+    assert dr[("easy", "VDN")][3:7] == [
+        "0.200 (s1 0.200; 1 of 3 seeds)",  # the same cell trained at coef 0.5
+        "0.400 (s1 0.400; 1 of 3 seeds)",  # trained at coef 0.5-2
+        "0.400 / 0.000 / 0.600",
+        "0.800 (s1 0.800; 1 of 3 seeds)",  # coef 1.0
+    ]
+    assert dr[("1", "VDN")][3] == "—"
+    assert "- paper_dr: 2 of 2 runs recorded" in text
+    # The paper preset's table counts the fixed-coef runs only.
+    assert _rows(text.split("`--dr_coef` (coef drawn")[0])[("easy", "VDN")][4].startswith("0.200")
+
+
+def test_the_dr_coef_variant_trains_the_paper_preset_at_the_released_coef_list(
+    tmp_path: Path,
+) -> None:
+    import argparse
+
+    args = argparse.Namespace(learner="paper_dr", workers=2, env="inprocess", torch_threads=1,
+                              set=[], minutes=30.0)  # fmt: skip
+    cfg = cell_config(args, "vdn", "1", 1, tmp_path)
+    plain = cell_config(argparse.Namespace(**{**vars(args), "learner": "paper"}), "vdn", "1", 1,
+                        tmp_path)  # fmt: skip
+    assert cfg.contexts == DR_COEF_CONTEXTS == "Friction_coeff=0.5;coef=0.5,0.7,1,1.4,1.7,2"
+    assert plain.contexts == "Friction_coeff=0.5;coef=0.5"
+    assert cfg.eval == plain.eval and cfg.learner == plain.learner  # tested and learned alike
