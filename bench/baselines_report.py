@@ -123,16 +123,16 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     for i, alg in enumerate(algs):
         row = result["iqm"][alg]
         left.plot(row["ci95"], [i, i], lw=6, alpha=0.5, color="tab:blue")
-        left.plot([row["iqm"]], [i], "k|", ms=14)
+        left.plot([row["iqm"]], [i], "k|", ms=14, clip_on=False)
     left.set_yticks(range(len(algs)), algs)
     left.set_xlabel("IQM of the test win rate (95 % stratified bootstrap)")
-    left.set_xlim(0, 1)
+    left.set_xlim(-0.03, 1.03)  # a mark at 0 or 1 stays visible
     for i, pair in enumerate(pairs):
         right.plot(pair["ci95"], [i, i], lw=6, alpha=0.5, color="tab:orange")
-        right.plot([pair["p"]], [i], "k|", ms=14)
+        right.plot([pair["p"]], [i], "k|", ms=14, clip_on=False)
     right.axvline(0.5, color="grey", ls=":")
     right.set_yticks(range(len(pairs)), [f"P({p['x']} > {p['y']})" for p in pairs])
-    right.set_xlim(0, 1)
+    right.set_xlim(-0.03, 1.03)
     right.set_xlabel("probability of improvement")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
