@@ -241,8 +241,14 @@ class NeuronsMAEClass(PettingZooClass):
 
     @staticmethod
     def log_info(batch: TensorDictBase) -> dict[str, float]:
-        """Blue's win rate and the share of episodes ended by the time limit, over the
-        episodes that ended in ``batch``."""
+        """Over the episodes that ended in ``batch``: blue's win rate, the share ended by the
+        time limit, and blue's team figures at the end (:data:`TEAM_FIGURES`).
+
+        BenchMARL also logs every info itself as ``collection/blue/info/<key>``, the mean
+        over all its entries: for the per-robot arrays (blue robots first, then red) that
+        mixes both teams (``damage_dealt`` then equals ``damage_taken``: both are the HP
+        lost in the episode over four robots), so the team's own figures are logged here.
+        """
         done = batch.get(("next", "done")).squeeze(-1)
         if not bool(done.any()):
             return {}
@@ -250,11 +256,27 @@ class NeuronsMAEClass(PettingZooClass):
         for key, name in (("battle_won", "win_rate"), ("episode_limit", "episode_limit_rate")):
             value = batch.get(("next", GROUP, "info", key))[done]
             out[f"collection/info/{name}"] = value[..., 0].to(torch.float).mean().item()
+        for key, (name, reduce) in TEAM_FIGURES.items():
+            value = batch.get(("next", GROUP, "info", key))[done]  # [episodes, agents, robots]
+            blue = value[:, 0, : value.shape[1]].to(torch.float)  # agent 0's view, blue robots
+            team = blue.sum(-1) if reduce == "sum" else blue.mean(-1)
+            out[f"collection/info/{name}"] = team.mean().item()
         return out
 
     @staticmethod
     def env_name() -> str:
         return ENV_NAME
+
+
+TEAM_FIGURES: dict[str, tuple[str, str]] = {
+    "damage_dealt": ("blue_damage_dealt", "sum"),
+    "damage_taken": ("blue_damage_taken", "sum"),
+    "bullets_fraction": ("blue_bullets_left", "mean"),
+    "hp_fraction": ("blue_hp_left", "mean"),
+}
+"""Per-robot infos logged for blue's robots alone at each episode's end, by
+:meth:`NeuronsMAEClass.log_info`: info key → (``collection/info/<name>``, over blue's robots:
+``sum`` of HP, or ``mean`` of fractions)."""
 
 
 class NeuronsMAETask(Task):

@@ -124,6 +124,15 @@ def test_log_info_reports_the_win_rate_of_finished_episodes() -> None:
         won = rollout["next", "blue", "info", "battle_won"][rollout["next", "done"].squeeze(-1)]
         assert logged["collection/info/win_rate"] == pytest.approx(won[:, 0].float().mean())
         assert 0.0 <= logged["collection/info/episode_limit_rate"] <= 1.0
+        # blue's own figures: its two robots' HP dealt and lost, not an average over four
+        ended = rollout["next", "blue", "info"][rollout["next", "done"].squeeze(-1)]
+        dealt = ended["damage_dealt"][:, 0, :2].sum(-1).double().mean()
+        taken = ended["damage_taken"][:, 0, :2].sum(-1).double().mean()
+        assert logged["collection/info/blue_damage_dealt"] == pytest.approx(float(dealt))
+        assert logged["collection/info/blue_damage_taken"] == pytest.approx(float(taken))
+        hp = ended["hp_fraction"][:, 0, :2].double().mean()
+        assert logged["collection/info/blue_hp_left"] == pytest.approx(float(hp))
+        assert 0.0 <= logged["collection/info/blue_bullets_left"] <= 1.0
     finally:
         env.close()
 
