@@ -300,15 +300,16 @@ def _win_rate(record: dict[str, Any]) -> float:
 
 
 def benchmarl_table(records: Sequence[dict[str, Any]]) -> list[str]:
-    """Per task and algorithm, over seeds: the test win rate's mean ± 95 % Student-t
-    interval, its IQM and each seed's figure."""
+    """Per task, red's bot and algorithm, over seeds: the test win rate's mean ± 95 %
+    Student-t interval, its IQM and each seed's figure (a record without ``level`` played
+    easy, the baselines' default)."""
     from bench.paper_report import interval
 
-    cells: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    cells: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     for r in records:
-        cells.setdefault((r["task"], r["algorithm"]), []).append(r)
+        cells.setdefault((r["task"], str(r.get("level", "easy")), r["algorithm"]), []).append(r)
     rows = []
-    for (task, alg), runs in sorted(cells.items()):
+    for (task, level, alg), runs in sorted(cells.items()):
         runs = sorted(runs, key=lambda r: r["seed"])
         rates = [_win_rate(r) for r in runs]
         mean, half = interval(rates)
@@ -316,8 +317,8 @@ def benchmarl_table(records: Sequence[dict[str, Any]]) -> list[str]:
         each = ", ".join(f"s{r['seed']} {_win_rate(r):.3f}" for r in runs)
         frames = [r["frames"] for r in runs if "frames" in r]
         trained = count(round(statistics.fmean(frames))) if frames else "—"
-        rows.append((task, alg, str(len(runs)), both, f"{_iqm(rates):.3f}", each, trained))
-    head = ("task", "algorithm", "seeds", "test win rate, mean ± 95 %", "IQM", "each seed",
+        rows.append((task, level, alg, str(len(runs)), both, f"{_iqm(rates):.3f}", each, trained))
+    head = ("task", "bot", "algorithm", "seeds", "test win rate, mean ± 95 %", "IQM", "each seed",
             "frames trained (mean)")  # fmt: skip
     return table(head, rows)
 

@@ -80,7 +80,11 @@ def test_benchmarl_renders_mean_interval_and_iqm_per_algorithm_and_task(tmp_path
     rates = [0.1, 0.5, 0.6, 0.7, 0.9]
     records = [_record("mappo", "coop_abstract", s, r) for s, r in enumerate(rates, 1)]
     records.append({"algorithm": "ippo", "task": "coop_abstract", "seed": 1, "test_win_rate": 0.4})
-    rows = {line.split("|")[2].strip(): line for line in benchmarl_table(records)[2:]}
+    records.append({**_record("mappo", "coop_abstract", 1, 0.95), "level": "random"})
+    lines = benchmarl_table(records)[2:]
+    assert len(lines) == 3  # against random: a row of its own, not a sixth seed against easy
+    rows = {line.split("|")[3].strip(): line for line in lines if "| easy |" in line}
+    assert "| coop_abstract | random | mappo | 1 | 0.950 |" in lines[2]
     # mean 0.56, t(0.975, 4) · stdev / √5 = 2.7764 · 0.2966 / 2.2361 = 0.368; the IQM drops
     # one of five from each end (rliable's 25 % trimmed mean): (0.5 + 0.6 + 0.7) / 3 = 0.6
     assert "| 5 | 0.560 ± 0.368 | 0.600 | s1 0.100, s2 0.500" in rows["mappo"]
