@@ -757,8 +757,8 @@ def learner(data: Data) -> str:
     ]  # fmt: skip
     about = ("Batch: episodes for the defaults' learner, transitions for the released one. "
              "Medians of the repeats; the speedup is over the step as it was before the "
-             "faster learner (the λ-returns by a loop over time steps, batches drawn inline), "
-             "timed in the same repeats.")  # fmt: skip
+             "faster learner (the λ-returns by a loop over time steps, the points head's first "
+             "form, batches drawn inline), timed in the same repeats.")  # fmt: skip
     return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
 
 
