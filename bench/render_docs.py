@@ -323,6 +323,25 @@ def benchmarl_table(records: Sequence[dict[str, Any]]) -> list[str]:
     return table(head, rows)
 
 
+PATTERN_FLAGS = {"--algorithms": "ALG", "--tasks": "TASK", "--seeds": "SEED"}
+"""A run's command as the page shows it: these flags' values become a placeholder (one
+pattern for a table of runs); ``--runs`` and ``--out``, the machine's own paths, are left
+out."""
+
+
+def _command_pattern(command: str) -> str:
+    out: list[str] = []
+    hidden = False  # the words after a flag whose values are not shown
+    for word in command.split():
+        if word.startswith("--"):
+            hidden = word in ("--runs", "--out") or word in PATTERN_FLAGS
+            if word not in ("--runs", "--out"):
+                out += [word, PATTERN_FLAGS[word]] if word in PATTERN_FLAGS else [word]
+        elif not hidden:
+            out.append(word)
+    return " ".join(out)
+
+
 def benchmarl(data: Data) -> str:
     """BenchMARL's baselines, or that they are not measured yet. The file is a list of
     records or ``{"command", "machine", "records"}``; a record may carry its own command and
@@ -336,7 +355,7 @@ def benchmarl(data: Data) -> str:
     commands = (
         [meta["command"]]
         if "command" in meta
-        else sorted({r["command"] for r in records if "command" in r})
+        else sorted({_command_pattern(r["command"]) for r in records if "command" in r})
     )
     said = ", ".join(f"`{c}`" for c in commands) or "an unrecorded command"
     machine = meta.get("machine")

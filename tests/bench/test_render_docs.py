@@ -96,6 +96,18 @@ def test_benchmarl_renders_mean_interval_and_iqm_per_algorithm_and_task(tmp_path
     text = render("results.md", root)
     assert "0.560 ± 0.368" in text
     assert "Measured by `python -m bench.benchmarl` on an H200" in text
+    # Runs that carry their own commands: one pattern each, without this machine's paths.
+    base = "python -m bench.benchmarl_baselines --runs /q/bml --out /q/b.json --minutes 30"
+    own = [{**r, "command": f"{base} --algorithms {r['algorithm']} --tasks {r['task']} "
+            f"--seeds {r['seed']}"} for r in records[:5]]  # fmt: skip
+    own.append({**own[0], "command": base + " --algorithms masac --seeds 1 --level random"})
+    (root / "docs/data/benchmarl_baselines.json").write_text(json.dumps({"records": own}))
+    said = render("results.md", root).split("Measured by ")[1]
+    assert said.startswith(
+        "`python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG --seeds SEED "
+        "--level random`, `python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG "
+        "--tasks TASK --seeds SEED` on "
+    )
 
 
 def test_readme_quotes_the_main_jobs_figure_and_stays_short() -> None:
