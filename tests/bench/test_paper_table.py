@@ -43,7 +43,7 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
         "paper",
     )
     # 4 iterations of 10 episodes, each max(2, 2·⌊stored / 200⌋) updates of 200 (the
-    # resumed half starts with an empty replay: a checkpoint holds no replay)
+    # resumed half starts with the first half's replay, saved beside its checkpoint)
     assert line["episodes"] == 40 and line["env_steps"] > 0 and line["iterations"] == 4
     assert line["updates"] > 4 * 2  # more than the floor once 400 transitions are stored
     assert line["samples"] == 200 * line["updates"]  # ≥ 200 transitions from the first

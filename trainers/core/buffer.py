@@ -23,7 +23,8 @@ and PyMARL's buffer).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -36,6 +37,10 @@ T = TypeVar("T")
 
 class IncompleteEpisodeError(ValueError):
     """An episode with missing steps, inconsistent shapes or no terminal step."""
+
+
+class ReplayStateError(ValueError):
+    """A saved replay does not fit the buffer it is loaded into (capacity, shapes, types)."""
 
 
 class ReplayMemoryError(ValueError):
@@ -190,7 +195,48 @@ class Batch:
         return Batch(**out)
 
 
-class EpisodeReplayBuffer:
+class _Ring(ABC):
+    """What both replays share: ring-buffer counters, and their contents as arrays that a
+    checkpoint can save (:meth:`state_dict`) and a resumed run load (:meth:`load_state_dict`)."""
+
+    capacity: int
+    next_slot: int
+    size: int
+    added: int
+
+    @abstractmethod
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The storage by name, one row per slot (filled or not)."""
+
+    def state_dict(self) -> dict[str, Any]:
+        """The stored rows (the first ``size`` slots; the ring's order is kept by
+        ``next_slot``) and the counters: NumPy arrays and ints only."""
+        rows = {name: a[: self.size] for name, a in self.arrays().items()}
+        return {"next_slot": self.next_slot, "size": self.size, "added": self.added, **rows}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict`'s contents into this (empty or not) buffer; refused
+        with :class:`ReplayStateError` if they do not fit its capacity and shapes."""
+        size, arrays = int(state["size"]), self.arrays()
+        if not 0 <= size <= self.capacity or not 0 <= int(state["next_slot"]) < self.capacity:
+            raise ReplayStateError(
+                f"a replay of {size} items (next slot {state['next_slot']}) does not fit a "
+                f"capacity of {self.capacity}"
+            )
+        for name, a in arrays.items():
+            rows = np.asarray(state[name])
+            if rows.shape != (size, *a.shape[1:]) or rows.dtype != a.dtype:
+                raise ReplayStateError(
+                    f"replay array {name!r}: {rows.dtype}{list(rows.shape)} where this task "
+                    f"stores {a.dtype}{[size, *a.shape[1:]]}"
+                )
+        for name, a in arrays.items():
+            a[:size] = state[name]
+            a[size:] = 0
+        self.next_slot, self.size, self.added = int(state["next_slot"]), size, int(state["added"])
+
+
+class EpisodeReplayBuffer(_Ring):
     """A ring buffer of the last ``capacity`` episodes, stored padded to ``episode_limit``."""
 
     def __init__(
@@ -221,6 +267,11 @@ class EpisodeReplayBuffer:
 
     def __len__(self) -> int:
         return self.size
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        names = ("obs", "state", "avail", "alive", "actions", "rewards", "terminated",
+                 "filled", "lengths")  # fmt: skip
+        return {name: getattr(self, name) for name in names}
 
     def add(self, episode: Episode) -> None:
         """Validate and store one episode, overwriting the oldest when full."""
@@ -303,7 +354,7 @@ def _check_memory(capacity: int, unit: str, per_item: int) -> None:
         )
 
 
-class TransitionReplayBuffer:
+class TransitionReplayBuffer(_Ring):
     """A ring buffer of the last ``capacity`` single transitions (the released code's
     replay, common/replay_buffer.py: 200,000 transitions; ``learner.replay="transitions"``).
 
@@ -333,6 +384,9 @@ class TransitionReplayBuffer:
 
     def __len__(self) -> int:
         return self.size
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return self.data
 
     def add(self, episode: Episode) -> None:
         """Validate an episode and store each of its decisions, overwriting the oldest

@@ -3,8 +3,11 @@
 A checkpoint holds only tensors and plain Python values (config as a dict, counters, RNG
 states as tuples and dicts), so ``torch.load(path, weights_only=True)`` reads it: loading a
 checkpoint never executes pickled code. It is written to a temporary file and renamed, so a
-run killed while saving leaves the previous checkpoint intact. The replay buffer is not
-saved (hundreds of MB for little benefit); a resumed run refills it before learning again.
+run killed while saving leaves the previous checkpoint intact. The replay is saved beside
+it (:func:`save_replay`, ``replay.npz``: NumPy arrays, read without pickle) when the run's
+``eval.save_replay`` is on, each time after the checkpoint, with the checkpoint's episode
+count; a resumed run loads it only if that count is the checkpoint's (a run killed between
+the two writes refills its replay instead).
 """
 
 from __future__ import annotations
@@ -22,11 +25,14 @@ import torch
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.protocol.errors import NeuronsMAEError
 from neuronsmae.trainers.core.agent import AGENT_NETWORKS, one_hot_width
+from neuronsmae.trainers.core.buffer import ReplayStateError
 from neuronsmae.trainers.core.features import FEATURES, HEADS, feature_dim
 from neuronsmae.trainers.core.learner import AgentSpec, EnvSpec
 
 CHECKPOINT_NAME = "checkpoint.pt"
 """File name of a run's latest checkpoint inside its run directory."""
+REPLAY_NAME = "replay.npz"
+"""File name of the replay saved with the latest checkpoint, inside the run directory."""
 FORMAT = 2
 """Bumped when the layout changes incompatibly (2: the nested training config, and agent
 specs that carry the environment's layout)."""
@@ -149,6 +155,44 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     if type(found) is not int or found != FORMAT:
         raise CheckpointError(f"{p} has checkpoint format {found!r}, not {FORMAT!r}")
     return payload
+
+
+def save_replay(path: Path, replay: Any, episodes: int) -> None:
+    """Write ``replay.state_dict()`` (a replay buffer's) to ``path`` atomically, marked with
+    ``episodes``, the training episodes of the checkpoint it goes with."""
+    state = replay.state_dict()
+    counters = {k: np.int64(state.pop(k)) for k in ("next_slot", "size", "added")}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to a name
+        np.savez(f, _episodes=np.int64(episodes), **{f"_{k}": v for k, v in counters.items()},
+                 **state)  # fmt: skip
+    os.replace(tmp, path)
+
+
+def load_replay(path: Path, replay: Any, episodes: int) -> str | None:
+    """Load the replay at ``path`` into ``replay`` if it was saved with a checkpoint of
+    ``episodes`` episodes and fits it (a resumed run may have a smaller buffer); returns why
+    not (None: loaded). A file that is not such a replay is refused with
+    :class:`CheckpointError`."""
+    if not path.is_file():
+        return f"no {path.name}"
+    try:
+        with np.load(path, allow_pickle=False) as saved:
+            stored = {k: saved[k] for k in saved.files}
+    except (OSError, ValueError) as exc:
+        raise CheckpointError(f"{path} is not a replay neuronsmae-train wrote ({exc})") from None
+    at = stored.pop("_episodes", None)
+    if at is None or int(at) != episodes:
+        return f"{path.name} was saved at {at} episodes, the checkpoint at {episodes}"
+    state = {k.removeprefix("_"): v for k, v in stored.items()}
+    try:
+        replay.load_state_dict(state)
+    except ReplayStateError as exc:  # e.g. a smaller learner.buffer_size on resume
+        return f"{path.name} does not fit this run's replay ({exc})"
+    except KeyError as exc:
+        raise CheckpointError(f"{path} lacks the replay array {exc}") from None
+    return None
 
 
 SPEC_FIELDS: dict[str, tuple[type, ...]] = {

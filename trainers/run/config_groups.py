@@ -297,6 +297,11 @@ class EvalConfig:
     the later weights, which trained longer."""
     checkpoint_every: int = 1000
     """Training episodes between checkpoints, ≥ 1 (one is always written at the end)."""
+    save_replay: bool = True
+    """Save the replay with each checkpoint (``replay.npz`` in the run directory: the
+    stored items, up to the buffer's size on disk, e.g. about 170 MB for the paper preset's
+    200,000 transitions), so that ``--resume`` continues with the replay the run had;
+    without it a resumed run refills its replay from empty."""
     eval_contexts: str = ""
     """The fixed reset contexts of every evaluation beyond the run's ``level``, as
     ``key=value`` entries separated by ``;`` (no sets or ranges: every evaluation meets the

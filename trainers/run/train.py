@@ -45,12 +45,15 @@ from neuronsmae.trainers.core.acting import Policy
 from neuronsmae.trainers.core.buffer import REPLAYS, Episode, ReplayMemoryError
 from neuronsmae.trainers.core.checkpoint import (
     CHECKPOINT_NAME,
+    REPLAY_NAME,
     CheckpointError,
     Counters,
     load_checkpoint,
+    load_replay,
     policy_weights,
     restore_rng,
     save_checkpoint,
+    save_replay,
 )
 from neuronsmae.trainers.core.learner import (
     DeviceError,
@@ -250,6 +253,11 @@ class Trainer:
             ) from err
         self.counters = Counters(**payload["counters"])
         restore_rng(payload["rng"], self.np_rng)
+        unloaded = load_replay(self.run_dir / REPLAY_NAME, self.buffer, self.counters.episodes)
+        if unloaded:
+            log.warning("replay not restored (%s): it refills from empty", unloaded)
+        else:
+            log.info("replay: %d items restored", len(self.buffer))
         if payload.get("starts") is not None:
             self.starts.load_state_dict(payload["starts"])
         self.competition.resume(payload.get("opponents"))
@@ -544,6 +552,9 @@ class Trainer:
             opponents=self.competition.state_dict(),
             finished=finished,
         )
+        if self.cfg.eval.save_replay:  # after the checkpoint: a resume checks they match
+            with self.learning.buffer_lock:
+                save_replay(self.run_dir / REPLAY_NAME, self.buffer, self.counters.episodes)
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, hook: Hook | None = None) -> dict[str, Any]:

@@ -13,6 +13,8 @@ from neuronsmae.trainers.core.buffer import (
     EpisodeReplayBuffer,
     IncompleteEpisodeError,
     ReplayMemoryError,
+    ReplayStateError,
+    TransitionReplayBuffer,
 )
 
 from ..conftest import ACTIONS, LIMIT, N_AGENTS, OBS, STATE, make_episode
@@ -106,3 +108,42 @@ def test_a_buffer_larger_than_the_available_memory_is_refused_with_what_fits(
     monkeypatch.undo()
     if sys.platform == "linux":  # the real figure: MemAvailable, in bytes
         assert 2**20 < (buffer_module.available_memory() or 0) < 2**50
+
+
+@pytest.mark.parametrize("kind", [EpisodeReplayBuffer, TransitionReplayBuffer])
+@pytest.mark.parametrize("episodes", [2, 7])  # partly filled, and wrapped round
+def test_a_replay_saved_and_loaded_draws_what_the_original_draws(
+    kind: type[EpisodeReplayBuffer | TransitionReplayBuffer], episodes: int
+) -> None:
+    rng = np.random.default_rng(5)
+    capacity = 4 if kind is EpisodeReplayBuffer else 20
+    original = kind(capacity, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(episodes):
+        original.add(make_episode(LIMIT, rng, dead_from=2))
+    state = original.state_dict()
+    assert all(isinstance(v, (int, np.ndarray)) for v in state.values())
+    copy = kind(capacity, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    copy.add(make_episode(LIMIT, rng))  # whatever it held is replaced
+    copy.load_state_dict(state)
+    assert (len(copy), copy.next_slot, copy.added) == (len(original), original.next_slot,
+                                                       original.added)  # fmt: skip
+    a, b = original.sample(5, np.random.default_rng(1)), copy.sample(5, np.random.default_rng(1))
+    for name in ("obs", "state", "avail", "alive", "actions", "rewards", "filled"):
+        assert torch.equal(getattr(a, name), getattr(b, name)), name
+    new = make_episode(LIMIT, rng)  # and both go on alike: the same slot is overwritten next
+    original.add(new)
+    copy.add(new)
+    for name, array in original.arrays().items():
+        assert np.array_equal(array, copy.arrays()[name]), name
+
+
+def test_a_saved_replay_that_does_not_fit_is_refused_with_what_differs() -> None:
+    rng = np.random.default_rng(6)
+    big = EpisodeReplayBuffer(8, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
+    for _ in range(6):
+        big.add(make_episode(LIMIT, rng))
+    with pytest.raises(ReplayStateError, match=r"6 items .* capacity of 4"):
+        _buffer(4).load_state_dict(big.state_dict())
+    other = EpisodeReplayBuffer(8, N_AGENTS, OBS + 1, STATE, ACTIONS, LIMIT)
+    with pytest.raises(ReplayStateError, match="replay array 'obs'"):
+        other.load_state_dict(big.state_dict())

@@ -64,6 +64,15 @@ def test_cli_two_workers_checkpoint_then_resume(tmp_path: Path) -> None:
     assert first["config"]["env"] == "remote" and first["config"]["cluster"]["groups"] == 2
     assert first["counters"]["episodes"] == 8 and first["counters"]["updates"] > 0
     assert first["config"]["alg"] == "qmix" and first["config"]["workers"] == 2
+    # The replay is saved beside the checkpoint, marked with its episodes, and comes back.
+    with np.load(out / "replay.npz") as saved:
+        assert int(saved["_episodes"]) == 8 and int(saved["_size"]) == 8
+    again = Trainer(make_config(first["config"], {"episodes": 12, "progress": False}),
+                    resume=True)  # fmt: skip
+    try:
+        assert len(again.buffer) == 8 and again.buffer.added == 8
+    finally:
+        again.close()
 
     assert main(["--resume", "--out", str(out), "--episodes", "12", "--quiet"]) == 0
     second = torch.load(out / "checkpoint.pt", weights_only=True)
