@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import random
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -180,7 +181,7 @@ def load_replay(path: Path, replay: Any, episodes: int) -> str | None:
     try:
         with np.load(path, allow_pickle=False) as saved:
             stored = {k: saved[k] for k in saved.files}
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # not an archive of arrays
         raise CheckpointError(f"{path} is not a replay neuronsmae-train wrote ({exc})") from None
     at = stored.pop("_episodes", None)
     if at is None or int(at) != episodes:

@@ -65,6 +65,10 @@ def test_a_file_that_is_no_replay_is_a_checkpoint_error_and_no_pickle_is_read(
     buf = EpisodeReplayBuffer(4, N_AGENTS, OBS, STATE, ACTIONS, LIMIT)
     with pytest.raises(CheckpointError, match="is not a replay neuronsmae-train wrote"):
         load_replay(path, buf, 0)
+    save_replay(path, buf, 0)
+    path.write_bytes(path.read_bytes()[:200])  # a truncated archive
+    with pytest.raises(CheckpointError, match="is not a replay"):
+        load_replay(path, buf, 0)
     with open(path, "wb") as f:  # an object array needs pickle to load: refused
         np.savez(f, _episodes=np.int64(0), obs=np.array([object()], dtype=object))
     with pytest.raises(CheckpointError, match="is not a replay"):
