@@ -16,11 +16,12 @@ transitions), at ``--transitions`` transitions per update.
 Each cell is timed ``--repeats`` times for ``--updates`` updates after three warm-up ones;
 the table gives the median ms per update, updates/s and transitions drawn per second
 (padding not counted). A batch is drawn, augmented and sent to the device as the trainer does
-it (in a background thread while the previous update runs). ``--reference`` also times the
-step as it was before the faster learner (the λ-returns by a Python loop over time steps,
-the points head's first form, each batch drawn inline) in the same repeats, interleaved,
-and reports the ratio. CPU cells run with ``torch.set_num_threads(t)``; CUDA cells only
-where torch sees a device.
+it (``--prefetch``, ``learner.prefetch``'s values: by default in a background thread while
+the previous update runs when the learner leaves a core free, else inline). ``--reference``
+also times the step as it was before the faster learner (the λ-returns by a Python loop
+over time steps, the points head's first form, each batch drawn inline) in the same
+repeats, interleaved, and reports the ratio. CPU cells run with ``torch.set_num_threads(t)``;
+CUDA cells only where torch sees a device.
 """
 
 from __future__ import annotations
@@ -39,7 +40,14 @@ from bench.common import write_out as write_to
 from neuronsmae.protocol.env_info import EnvInfo
 from neuronsmae.trainers.core import agent as agent_module
 from neuronsmae.trainers.core import learner as learner_module
-from neuronsmae.trainers.core.buffer import REPLAYS, Batch, Episode, prefetched
+from neuronsmae.trainers.core.buffer import (
+    PREFETCH,
+    REPLAYS,
+    Batch,
+    Episode,
+    prefetch_pays,
+    prefetched,
+)
 from neuronsmae.trainers.core.learner import EnvSpec, QLearner, agent_spec
 from neuronsmae.trainers.core.symmetry import augment, parse_generators, task_group
 from neuronsmae.trainers.run.config import make_config, preset
@@ -63,7 +71,10 @@ STORED = {"episodes": 600, "transitions": 40_000}
 class Cell:
     """One learner at one batch size on one device, with its replay and batch maker."""
 
-    def __init__(self, learner: str, alg: str, batch: int, device: torch.device, seed: int):
+    def __init__(
+        self, learner: str, alg: str, batch: int, device: torch.device, seed: int,
+        prefetch: str = "auto",
+    ) -> None:  # fmt: skip
         info = EnvInfo.from_dict(TASK)
         cfg = make_config(preset("paper") if learner == "released" else {}, {"alg": alg})
         lc = resolve_learner(cfg.learner, info, "full", "random")
@@ -74,6 +85,9 @@ class Cell:
         )  # fmt: skip
         torch.manual_seed(seed)
         self.learner: QLearner = make_learner(self.env, spec, alg, cfg.learner, device)
+        self.background = prefetch_pays(prefetch, device)
+        """Whether the faster step draws its next batch in a background thread (as a run
+        with ``learner.prefetch`` = ``prefetch`` would, at the threads set when built)."""
         self.group = task_group(parse_generators(lc.augment), lc.features, info)
         self.batch, self.rng = batch, np.random.default_rng(seed)
         e = self.env
@@ -117,7 +131,7 @@ class Cell:
                 for _ in range(updates):
                     learner.train(self.make())
             else:
-                for batch in prefetched(self.make, updates):
+                for batch in prefetched(self.make, updates, self.background):
                     learner.train(batch)
             self._sync()
             return time.perf_counter() - start, learner.samples - before
@@ -178,6 +192,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--updates", type=at_least(1), default=20)
     p.add_argument("--repeats", type=at_least(1), default=3)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--prefetch", choices=PREFETCH, default="auto",
+                   help="the faster step's batches in a background thread: learner.prefetch's "
+                   "values (auto: when the learner leaves a core free)")  # fmt: skip
     p.add_argument("--reference", action="store_true",
                    help="time the step before the faster learner beside it (ratio)")  # fmt: skip
     add_out(p, "learner")
@@ -190,10 +207,10 @@ def main(argv: list[str] | None = None) -> int:
     for learner, alg, batch, device, threads in cells(args):
         if device == "cpu":
             torch.set_num_threads(threads)
-        cell = Cell(learner, alg, batch, torch.device(device), args.seed)
+        cell = Cell(learner, alg, batch, torch.device(device), args.seed, args.prefetch)
         figures = measure(cell, args)
         row = {"learner": learner, "alg": alg, "batch": batch, "device": device,
-               "threads": threads or None, **figures}  # fmt: skip
+               "threads": threads or None, "prefetch": cell.background, **figures}  # fmt: skip
         rows.append(row)
         print(_line(row), flush=True)
     print(table([_flat(r) for r in rows], list(_flat(rows[0]))))
@@ -209,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
 def _flat(row: dict[str, Any]) -> dict[str, Any]:
     new = row["new"]
     flat = {k: row[k] for k in ("learner", "alg", "batch", "device", "threads")}
+    flat["prefetch"] = "background" if row.get("prefetch", True) else "inline"
     flat |= {"ms/update": f"{new['ms_per_update']:.1f}", "updates/s": f"{new['updates_per_s']:.1f}",
              "transitions/s": f"{new['transitions_per_s']:,.0f}"}  # fmt: skip
     if "speedup" in row:

@@ -777,7 +777,9 @@ def learner(data: Data) -> str:
     about = ("Batch: episodes for the defaults' learner, transitions for the released one. "
              "Medians of the repeats; the speedup is over the step as it was before the "
              "faster learner (the λ-returns by a loop over time steps, the points head's first "
-             "form, batches drawn inline), timed in the same repeats.")  # fmt: skip
+             "form, batches drawn inline), timed in the same repeats; the faster step draws "
+             "its batches as a run does (`learner.prefetch=auto`: in a background thread when "
+             "the learner leaves a core free, inline otherwise).")  # fmt: skip
     return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
 
 

@@ -23,6 +23,7 @@ and PyMARL's buffer).
 from __future__ import annotations
 
 import dataclasses
+import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -434,13 +435,32 @@ class TransitionReplayBuffer(_Ring):
         )
 
 
-def prefetched(make: Callable[[], T], n: int) -> Iterator[T]:
+PREFETCH = ("auto", "on", "off")
+"""``learner.prefetch``'s values (:func:`prefetch_pays`)."""
+
+
+def prefetch_pays(setting: str, device: torch.device) -> bool:
+    """Whether the next batch is made in a background thread (``learner.prefetch``): on,
+    off, or auto: when the learner leaves a core for it (a CUDA device, or fewer intra-op
+    threads than this process may use). On a machine whose cores the update's own threads
+    fill, the thread takes a core from them (and spinning OpenMP threads wait for it)."""
+    if setting != "auto":
+        return setting == "on"
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return device.type == "cuda" or torch.get_num_threads() < (cores or 1)
+
+
+def prefetched(make: Callable[[], T], n: int, background: bool = True) -> Iterator[T]:
     """``make()`` called ``n`` times, each call made in a background thread while the caller
     works with the previous result: a batch is sampled, augmented and sent to the learner's
     device while the previous one trains (torch releases the GIL in its kernels). The calls
     run one after another, in order, so a seeded generator they draw from gives the same
-    batches as calling ``make`` inline."""
+    batches as calling ``make`` inline, which is what ``background=False`` does."""
     if n <= 0:
+        return
+    if not background:
+        for _ in range(n):
+            yield make()
         return
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch") as pool:
         pending = pool.submit(make)

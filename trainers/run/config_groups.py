@@ -23,6 +23,7 @@ from neuronsmae.trainers.checks import (
     check_positive,
     check_types,
 )
+from neuronsmae.trainers.core.buffer import PREFETCH
 from neuronsmae.trainers.core.features import FEATURES, HEADS, POINT_FEATURES
 from neuronsmae.trainers.core.learner import DeviceError, check_device_name
 from neuronsmae.trainers.core.symmetry import GENERATORS, parse_generators
@@ -182,6 +183,12 @@ class LearnerConfig:
     go to the workers and checkpoints to disk on the CPU, so a checkpoint written on one
     device loads on the other. A CUDA device this machine lacks stops the run before
     anything starts. (The released code's ``--cuda``; the paper is silent.)"""
+    prefetch: str = "auto"
+    """Where the next batch is drawn, augmented and sent to the device: on (in a background
+    thread while the current update trains), off (inline, before each update) or auto (in
+    the background when the learner leaves a core for it: on CUDA, or with fewer intra-op
+    threads than the process has cores; inline otherwise, where the thread would only take
+    a core from the update's own threads). The same batches either way."""
     eps_schedule: str = "episodes"
     """How ε falls from eps_start to eps_end: episodes (linearly with the run's episode
     count over ``eps_anneal_episodes``) or iterations (needs ``sync`` and
@@ -195,6 +202,7 @@ class LearnerConfig:
         check_types(self)
         check_choice("agent_net", self.agent_net, ("gru", "mlp"))
         check_choice("replay", self.replay, ("episodes", "transitions"))
+        check_choice("prefetch", self.prefetch, PREFETCH)
         check_choice("target_update_unit", self.target_update_unit, ("updates", "rounds"))
         check_choice("action_masks", self.action_masks, ("env", "ones"))
         check_choice("mixer_state", self.mixer_state, ("state", "agent0_obs"))

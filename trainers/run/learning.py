@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuronsmae.trainers.core.buffer import Batch, Episode, prefetched
+from neuronsmae.trainers.core.buffer import Batch, Episode, prefetch_pays, prefetched
 from neuronsmae.trainers.core.checkpoint import Counters
 from neuronsmae.trainers.core.learner import (
     AgentSpec,
@@ -68,6 +68,8 @@ class Learning:
         """The learner's own thread (``replay_ratio`` > 0), while a session runs."""
         self.last_stats: dict[str, float] = {}
         self.session_episodes, self.learn_base, self.weights_at = 0, 0.0, 0
+        self.background = prefetch_pays(cfg.prefetch, learner.device)
+        """Whether inline rounds draw their next batch in a background thread."""
 
     # --- episodes and batches -------------------------------------------------------------
     def store(self, episode: Episode) -> None:
@@ -154,7 +156,8 @@ class Learning:
         targets are copied after its first update when ``refreshes_targets`` says so for
         this round."""
         refresh = self.cfg.refreshes_targets(counters.rounds)
-        batches = prefetched(self.next_batch, self.cfg.updates_in_round(len(self.buffer)))
+        batches = prefetched(self.next_batch, self.cfg.updates_in_round(len(self.buffer)),
+                             self.background)  # fmt: skip
         for u, batch in enumerate(batches):
             self.last_stats = self.learner.train(batch)
             if refresh and u == 0:

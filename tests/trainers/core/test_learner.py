@@ -252,3 +252,23 @@ def test_prefetched_batches_come_in_order_from_a_background_thread() -> None:
     assert list(prefetched(make, 5)) == [1, 2, 3, 4, 5]
     assert all(name.startswith("prefetch") for name in made)
     assert list(prefetched(make, 0)) == []
+    made.clear()  # inline: the same calls in the same order, in the caller's thread
+    assert list(prefetched(make, 3, background=False)) == [1, 2, 3]
+    assert made == [threading.current_thread().name] * 3
+
+
+def test_batches_are_made_in_the_background_only_where_a_core_is_left_for_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import os
+
+    from neuronsmae.trainers.core import buffer
+
+    cpu, cuda = torch.device("cpu"), torch.device("cuda")
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 1)
+    assert buffer.prefetch_pays("auto", cpu)  # one intra-op thread on two cores
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 2)
+    assert not buffer.prefetch_pays("auto", cpu)  # the update's threads fill both cores
+    assert buffer.prefetch_pays("auto", cuda)  # the CPU waits for the GPU anyway
+    assert buffer.prefetch_pays("on", cpu) and not buffer.prefetch_pays("off", cuda)

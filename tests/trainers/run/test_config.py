@@ -30,7 +30,7 @@ def test_the_configuration_is_grouped_and_small() -> None:
     assert len(top) < 35 and set(GROUPS) <= set(top)
     sizes = {name: len(dataclasses.fields(cls)) for name, cls in GROUPS.items()}
     assert sizes == {
-        "learner": 34, "eval": 10, "cluster": 10, "arena": 9, "selfplay": 2, "experimental": 3
+        "learner": 35, "eval": 10, "cluster": 10, "arena": 9, "selfplay": 2, "experimental": 3
     }  # fmt: skip
     assert len(KEYS) == len(top) - len(GROUPS) + sum(sizes.values())
 
@@ -349,6 +349,7 @@ def test_default_workers_are_cores_less_one_and_at_least_two(
         ({"eval.extra_test_contexts": "||"}, "not be empty"),
         ({"level": "2"}, "level='2' is not valid"),
         ({"iteration_episodes": -1}, "iteration_episodes"),
+        ({"learner.prefetch": "sometimes"}, "prefetch='sometimes' is not valid; valid: auto, on"),
     ],
 )
 def test_bad_contexts_and_levels_are_config_errors(layer: dict, message: str) -> None:
