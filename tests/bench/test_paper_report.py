@@ -61,7 +61,7 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     own = _rows(text.split("This project's learner")[1].split("Compute")[0])
     assert own[("easy", "VDN")][4] == "0.900 (s1 0.900; 1 of 3 seeds)"
     compute = text.split("Compute:")[1]
-    assert "paper: 4 of 33 runs recorded, 120,000 training episodes (5.9 million" in compute
+    assert "paper: 4 of 29 runs recorded, 120,000 training episodes (5.9 million" in compute
     assert "1,120,000 gradient updates on 2240 million sampled transitions, 2.0 h" in compute
     assert "defaults: 1 of 9 runs recorded" in compute
     # A record written before runs counted their sampled transitions claims none of them.
@@ -91,7 +91,7 @@ def test_main_counts_the_seeds_recorded_beside_those_asked_for(
     records = [_record("vdn", "easy", s, 0.5) for s in (1, 2, 3)]
     out.write_text(json.dumps({"records": records}))
     assert main(["--report", "--seeds", "1", "--out", str(out)]) == 0
-    assert "paper: 3 of 33 runs recorded" in capsys.readouterr().out
+    assert "paper: 3 of 29 runs recorded" in capsys.readouterr().out
 
 
 def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
