@@ -108,3 +108,21 @@ def test_a_run_finished_but_not_recorded_is_recorded_without_training_again(
                  and r["contexts"] == "main"]  # fmt: skip
     assert line["test"]["main"]["win_rate"] == float(final[-1]["win_rate"])
     assert line["test"]["main"]["episodes"] == 3
+
+
+def test_the_dr_coef_variant_trains_on_the_released_coefs_and_is_tested_as_released(
+    tmp_path: Path,
+) -> None:
+    import csv
+
+    runs, out = tmp_path / "runs", tmp_path / "table.json"
+    sets = [arg for kv in [*TINY, "episodes=20"] for arg in ("--set", kv)]
+    assert main(["--learner", "paper_dr", "--levels", "easy", "--seeds", "1", "--workers", "2",
+                 "--runs", str(runs), "--out", str(out), *sets]) == 0  # fmt: skip
+    (line,) = json.loads(out.read_text())["records"]
+    assert (line["learner"], line["alg"], line["preset"]) == ("paper_dr", "vdn", "paper")
+    assert line["contexts"] == "Friction_coeff=0.5;coef=0.5,0.7,1,1.4,1.7,2"
+    assert line["test_contexts"]["main"] == {"level": "easy", "Friction_coeff": 0.5, "coef": 1.5}
+    with open(runs / "paper_dr" / "vdn_easy_s1" / "episodes.csv", newline="") as f:
+        coefs = {json.loads(row["contexts"])["coef"] for row in csv.DictReader(f)}
+    assert coefs <= {0.5, 0.7, 1, 1.4, 1.7, 2} and len(coefs) > 1  # drawn per episode
