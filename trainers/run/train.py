@@ -147,6 +147,9 @@ class Trainer:
         self.resumed_steps: int | None = None
         """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
         self.recorder: Recorder | None = None
+        self.replay_saved_at: int | None = None
+        """The episode count of the replay on disk (a checkpoint at the same count, e.g. the
+        finished one or one for new best weights, does not write it again)."""
         self.closed = False
         """Set by :meth:`close`: a trainer runs once."""
         self.lock = RunLock(self.run_dir)
@@ -257,6 +260,7 @@ class Trainer:
         if unloaded:
             log.warning("replay not restored (%s): it refills from empty", unloaded)
         else:
+            self.replay_saved_at = self.counters.episodes
             log.info("replay: %d items restored", len(self.buffer))
         if payload.get("starts") is not None:
             self.starts.load_state_dict(payload["starts"])
@@ -552,9 +556,11 @@ class Trainer:
             opponents=self.competition.state_dict(),
             finished=finished,
         )
-        if self.cfg.eval.save_replay:  # after the checkpoint: a resume checks they match
-            with self.learning.buffer_lock:
-                save_replay(self.run_dir / REPLAY_NAME, self.buffer, self.counters.episodes)
+        episodes = self.counters.episodes
+        if self.cfg.eval.save_replay and self.replay_saved_at != episodes:  # after the checkpoint
+            with self.learning.buffer_lock:  # (a resume checks that the two counts match)
+                save_replay(self.run_dir / REPLAY_NAME, self.buffer, episodes)
+            self.replay_saved_at = episodes
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, hook: Hook | None = None) -> dict[str, Any]:
