@@ -777,12 +777,9 @@ def learner(data: Data) -> str:
     about = ("Batch: episodes for the defaults' learner, transitions for the released one. "
              "Medians of the repeats; the speedup is over the step as it was before the "
              "faster learner (the λ-returns by a loop over time steps, the points head's first "
-             "form, batches drawn inline), timed in the same repeats; the faster step draws "
-             "its batches as a run does (`learner.prefetch=auto`: in a background thread when "
-             "the learner leaves a core free, inline otherwise). Run with "
+             "form, batches drawn inline), timed in the same repeats. Run with "
              "`OMP_WAIT_POLICY=PASSIVE`, the setting for a learner that shares its cores with "
-             "workers; alone on the machine, OpenMP's default (spinning) policy takes 2 threads "
-             "to about 0.6 of these times (docs/lab/benchmarks-log.md).")  # fmt: skip
+             "workers (OpenMP's default policy: docs/lab/benchmarks-log.md).")  # fmt: skip
     return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
 
 
