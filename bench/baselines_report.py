@@ -11,8 +11,9 @@ Gathers every run's final test win rate into one marl-eval JSON (InstaDeep's for
 BenchMARL's logger writes; ``--json``): BenchMARL runs from the baselines table
 (:mod:`bench.benchmarl_baselines`, the same 200 held-out test episodes and referee's rule as
 the trainers' final test) and ``neuronsmae-train`` runs from the ``marl_eval.json`` each run
-writes (copied into ``--runs``). Then, per algorithm over the runs × tasks it has, the
-interquartile mean (IQM) with a 95 % stratified-bootstrap interval, and for every pair of
+writes (copied into ``--runs``). Then, per algorithm and task, the interquartile mean (IQM)
+of its runs with a 95 % bootstrap interval (one row per task: a task with continuous actions
+is not pooled with one with abstract actions), and for every pair of
 algorithms with tasks in common the probability that a run of one beats a run of the other
 on a task (with its interval), as rliable defines them (Agarwal et al., 2021, "Deep RL at
 the edge of the statistical precipice"); written out here with NumPy because rliable 1.2
@@ -95,13 +96,15 @@ def bootstrap(
 
 
 def summary(by_alg: dict[str, Scores], reps: int) -> dict[str, Any]:
-    """IQM with its interval per algorithm, and the probability of improvement per pair."""
-    out: dict[str, Any] = {"iqm": {}, "improvement": []}
+    """IQM with its interval per algorithm and task, and the probability of improvement per
+    pair of algorithms over the tasks they share."""
+    out: dict[str, Any] = {"iqm": [], "improvement": []}
     for alg, per_task in sorted(by_alg.items()):
-        low, high = bootstrap(iqm, (per_task,), reps)
-        runs = int(sum(len(v) for v in per_task.values()))
-        out["iqm"][alg] = {"iqm": iqm(per_task), "ci95": [low, high], "runs": runs,
-                           "tasks": sorted(per_task)}  # fmt: skip
+        for task, runs in sorted(per_task.items()):
+            one = {task: runs}
+            low, high = bootstrap(iqm, (one,), reps)
+            out["iqm"].append({"learner": alg, "task": task, "iqm": iqm(one),
+                               "ci95": [low, high], "runs": len(runs)})  # fmt: skip
     for a, b in itertools.permutations(sorted(by_alg), 2):
         if set(by_alg[a]) & set(by_alg[b]):
             p = improvement(by_alg[a], by_alg[b])
@@ -117,15 +120,14 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    algs = list(result["iqm"])
+    rows = result["iqm"]
     pairs = [p for p in result["improvement"] if p["x"] < p["y"]]
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 0.5 * max(len(algs), len(pairs)) + 1.6))
-    for i, alg in enumerate(algs):
-        row = result["iqm"][alg]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 0.5 * max(len(rows), len(pairs)) + 1.6))
+    for i, row in enumerate(rows):
         left.plot(row["ci95"], [i, i], lw=6, alpha=0.5, color="tab:blue")
         left.plot([row["iqm"]], [i], "k|", ms=14, clip_on=False)
-    left.set_yticks(range(len(algs)), algs)
-    left.set_xlabel("IQM of the test win rate (95 % stratified bootstrap)")
+    left.set_yticks(range(len(rows)), [f"{r['learner']}\n{r['task']}" for r in rows])
+    left.set_xlabel("IQM of the test win rate per task (95 % bootstrap)")
     left.set_xlim(-0.03, 1.03)  # a mark at 0 or 1 stays visible
     for i, pair in enumerate(pairs):
         right.plot(pair["ci95"], [i, i], lw=6, alpha=0.5, color="tab:orange")
@@ -134,6 +136,8 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     right.set_yticks(range(len(pairs)), [f"P({p['x']} > {p['y']})" for p in pairs])
     right.set_xlim(-0.03, 1.03)
     right.set_xlabel("probability of improvement")
+    left.invert_yaxis()  # rows top to bottom in the table's order
+    right.invert_yaxis()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -161,9 +165,11 @@ def main(argv: list[str] | None = None) -> int:
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(document, indent=1))
     args.summary.write_text(json.dumps(result, indent=1))
-    for alg, row in result["iqm"].items():
-        print(f"{alg}: IQM {row['iqm']:.3f} [{row['ci95'][0]:.3f}, {row['ci95'][1]:.3f}] "
-              f"over {row['runs']} runs on {', '.join(row['tasks'])}")  # fmt: skip
+    for row in result["iqm"]:
+        print(
+            f"{row['learner']} on {row['task']}: IQM {row['iqm']:.3f} "
+            f"[{row['ci95'][0]:.3f}, {row['ci95'][1]:.3f}] over {row['runs']} runs"
+        )
     if result["iqm"]:
         print(f"wrote {args.json}, {args.summary} and {plot(result, args.plot)}")
     return 0

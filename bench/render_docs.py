@@ -726,17 +726,17 @@ def _present(data: Data, name: str) -> list[dict[str, Any]]:
 
 
 def baselines_iqm(data: Data) -> str:
-    """Every learner on one scale: the IQM of its runs' test win rates with a 95 %
-    stratified-bootstrap interval, and the probability of improvement between pairs."""
+    """Every learner on one scale: per task, the IQM of its runs' test win rates with a 95 %
+    bootstrap interval, and the probability of improvement between pairs."""
     srcs = _present(data, "baselines_iqm")
     if not srcs:
         return "Not measured yet."
     result = data.load(srcs[0]["file"])
-    head = ("learner", "runs", "tasks", "IQM of the test win rate", "95 % interval")
+    head = ("learner", "task", "runs", "IQM of the test win rate", "95 % interval")
     body = [
-        (alg, str(r["runs"]), ", ".join(r["tasks"]), rate(r["iqm"]),
+        (r["learner"], r["task"], str(r["runs"]), rate(r["iqm"]),
          f"{rate(r['ci95'][0])}–{rate(r['ci95'][1])}")
-        for alg, r in result["iqm"].items()
+        for r in result["iqm"]
     ]  # fmt: skip
     pairs = [p for p in result["improvement"] if p["x"] < p["y"]]
     head2 = ("X", "Y", "P(X > Y)", "95 % interval")

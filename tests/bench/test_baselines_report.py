@@ -42,6 +42,8 @@ def test_baseline_records_become_marl_eval_json_and_a_report(tmp_path: Path) -> 
          "test": {"win_rate": w}} for s, w in ((1, 0.4), (2, 0.6), (3, 0.5))
     ]}  # fmt: skip
     doc = from_baselines(table)
+    table["records"].append({"algorithm": "mappo", "task": "coop_continuous", "level": "easy",
+                             "seed": 1, "test": {"win_rate": 0.0}})  # fmt: skip
     check_format(doc)
     got = scores(doc)
     assert list(got) == ["mappo (benchmarl)"]
@@ -60,7 +62,15 @@ def test_baseline_records_become_marl_eval_json_and_a_report(tmp_path: Path) -> 
             "--plot", str(out / "p.png")]  # fmt: skip
     assert main(args) == 0
     summary = json.loads((out / "s.json").read_text())
-    assert set(summary["iqm"]) == {"mappo (benchmarl)", "vdn"}
+    rows = {(r["learner"], r["task"]): r for r in summary["iqm"]}
+    assert set(rows) == {  # a task per row: continuous actions are not pooled with abstract ones
+        ("mappo (benchmarl)", "coop_abstract_easy"),
+        ("mappo (benchmarl)", "coop_continuous_easy"),
+        ("vdn", "coop_abstract_easy"),
+    }
+    assert rows["mappo (benchmarl)", "coop_abstract_easy"]["iqm"] == pytest.approx(0.5)
+    assert rows["mappo (benchmarl)", "coop_continuous_easy"]["iqm"] == 0.0
+    assert rows["mappo (benchmarl)", "coop_abstract_easy"]["runs"] == 3
     assert {(p["x"], p["y"]) for p in summary["improvement"]} == {
         ("mappo (benchmarl)", "vdn"),
         ("vdn", "mappo (benchmarl)"),
