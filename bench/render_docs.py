@@ -783,6 +783,22 @@ def learner(data: Data) -> str:
     return "\n".join([*table(head, body), "", about, "", measured(data, srcs)])
 
 
+def scripted_continuous(data: Data) -> str:
+    """Scripted continuous-action teams against a bot on the held-out test episodes: win
+    rate with its Wilson interval, draws and losses."""
+    srcs = _present(data, "scripted_continuous")
+    if not srcs:
+        return "Not measured yet."
+    head = ("team", "bot", "episodes", "win rate (95 %)", "draws", "losses")
+    body = [
+        (r["team"], r["level"], str(r["episodes"]),
+         f"{rate(r['win_rate'])} ({rate(r['win_ci95'][0])}–{rate(r['win_ci95'][1])})",
+         rate(r["draw_rate"]), rate(r["loss_rate"]))
+        for src in srcs for r in data.load(src["file"])["rows"]
+    ]  # fmt: skip
+    return "\n".join([*table(head, body), "", measured(data, srcs)])
+
+
 def training_scaling(data: Data) -> str:
     """Training episodes and updates per minute against the worker count."""
     srcs = _present(data, "training_scaling")
@@ -840,6 +856,7 @@ TABLES: dict[str, Callable[[Data], str]] = {
     "scaling": scaling,
     "bots": bots,
     "baselines_iqm": baselines_iqm,
+    "scripted_continuous": scripted_continuous,
     "learner": learner,
     "training_scaling": training_scaling,
     "decoupled": decoupled,

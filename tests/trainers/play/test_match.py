@@ -232,3 +232,13 @@ def test_over_a_server_the_match_plays_as_in_process(checkpoints: tuple[Path, Pa
     assert served["winners"] == here["winners"]
     bot_here = M.play("hard", a, 2, 11, arenas=2)
     assert M.play("hard", a, 2, 11, arenas=2, servers=2)["winners"] == bot_here["winners"]
+
+
+def test_the_wilson_interval_holds_the_rate_and_is_exact_at_the_ends() -> None:
+    assert M.wilson(0, 200)[0] == 0.0 and M.wilson(200, 200)[1] == 1.0
+    for k in (0, 1, 37, 100, 199, 200):
+        low, high = M.wilson(k, 200)
+        assert 0.0 <= low <= k / 200 <= high <= 1.0
+    low, high = M.wilson(100, 200)  # p = 0.5, n = 200: 0.5 ± 1.96·√(0.25/200) nearly
+    assert (low, high) == pytest.approx((0.4314, 0.5686), abs=1e-3)
+    assert M.wilson(0, 0) == (0.0, 1.0)
