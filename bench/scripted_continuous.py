@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.benchmarl_baselines import TEST_SEED
 from bench.common import (
     Distinct,
     add_out,
@@ -50,10 +51,7 @@ from neuronsmae.protocol import EnvInfo
 from neuronsmae.protocol.env_info import FIELD_HALF
 from neuronsmae.protocol.levels import LEVEL_ARGS, level_from_arg
 from neuronsmae.trainers.play.match import wilson
-from neuronsmae.trainers.run.config_groups import TEST_SEED_OFFSET, EvalConfig
 
-TEST_SEED = EvalConfig().eval_seed + TEST_SEED_OFFSET
-"""The first seed of the trainers' final test."""
 RANGE = 2.5
 """Distance ``aim_close`` holds to its target (m): the candidate points' radius."""
 
