@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--report", action="store_true", help="print the table of --out and stop")
     args = p.parse_args(argv)
     if args.report:
-        from bench.render_docs import benchmarl_table
+        from bench.pages.results import benchmarl_table
 
         print("\n".join(benchmarl_table(load(args.out)["records"])))
         return 0

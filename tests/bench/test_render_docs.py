@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from bench import render_docs
-from bench.render_docs import PAGES, TABLES, benchmarl_table, headline, render, stale
+from bench.pages.results import benchmarl_table, headline
+from bench.render_docs import PAGES, TABLES, render, stale
 
 ROOT = Path(__file__).resolve().parents[2]
 
