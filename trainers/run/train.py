@@ -518,15 +518,20 @@ class Trainer:
         assert self.best is not None
         state = self.learning.state_dict()
         state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
+        self._save(BEST_NAME, state, selection=self.best[1])
+
+    def _save(self, name: str, learner_state: dict[str, Any], **extra: Any) -> None:
+        """A checkpoint-format file ``<run_dir>/<name>``: the run's config, arena, spec,
+        counters and RNG with ``learner_state`` and ``extra``."""
         save_checkpoint(
-            self.run_dir / BEST_NAME,
+            self.run_dir / name,
             config=self.cfg.to_dict(),
             env=self.env,
             spec=self.spec,
-            learner_state=state,
+            learner_state=learner_state,
             counters=self.counters,
             np_rng=self.np_rng,
-            selection=self.best[1],
+            **extra,
         )
 
     def _evaluate_best(self) -> dict[str, Any] | None:
@@ -543,15 +548,9 @@ class Trainer:
     def checkpoint(self, finished: bool = False) -> None:
         """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``
         (``finished``: after the final evaluation)."""
-        state = self.learning.state_dict()
-        save_checkpoint(
-            self.run_dir / CHECKPOINT_NAME,
-            config=self.cfg.to_dict(),
-            env=self.env,
-            spec=self.spec,
-            learner_state=state,
-            counters=self.counters,
-            np_rng=self.np_rng,
+        self._save(
+            CHECKPOINT_NAME,
+            self.learning.state_dict(),
             starts=self.starts.state_dict(),
             opponents=self.competition.state_dict(),
             finished=finished,
