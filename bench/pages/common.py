@@ -108,11 +108,9 @@ def files(data: Data, command: str, sources: Sequence[dict[str, Any]]) -> str:
     return f"{cmd} → {', '.join(each)}"
 
 
-def test_win(run: dict[str, Any], which: str) -> float:
+def win_of(run: dict[str, Any], which: str) -> float:
+    """A ``neuronsmae-train`` run's test win rate with its ``"latest"`` or ``"best"`` weights."""
     return run["test"][which]["win_rate"]
-
-
-# --- results.md --------------------------------------------------------------------------
 
 
 def machines(records: Sequence[dict[str, Any]]) -> str:

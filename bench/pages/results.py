@@ -19,7 +19,7 @@ from bench.pages.common import (
     rate,
     span,
     table,
-    test_win,
+    win_of,
 )
 
 
@@ -42,8 +42,8 @@ def main_job(data: Data) -> str:
             str(f.get("commit", ""))[:7],
             count(r["episodes"]),
             count(r["updates"]),
-            rate(test_win(r, "latest")),
-            rate(test_win(r, "best")),
+            rate(win_of(r, "latest")),
+            rate(win_of(r, "best")),
         )
         for i, (f, r) in enumerate(runs, 1)
     ]
@@ -56,7 +56,7 @@ def main_job(data: Data) -> str:
         f"best-validated (test, {TEST_EPISODES})",
     )
     target = data.table("main_job")["target"]
-    met = sum(test_win(r, "latest") >= target for _, r in runs)
+    met = sum(win_of(r, "latest") >= target for _, r in runs)
     verdict = (
         f"Target, a final test win rate of at least {rate(target)}: met in {met} of "
         f"{len(runs)} runs."
@@ -69,7 +69,7 @@ def main_job(data: Data) -> str:
 def headline(root: Path = ROOT) -> str:
     """The README's headline figure: the main job's final test win rates."""
     runs = _main_job_runs(Data(root))
-    return f"{span(test_win(r, 'latest') for _, r in runs)} ({len(runs)} runs)"
+    return f"{span(win_of(r, 'latest') for _, r in runs)} ({len(runs)} runs)"
 
 
 def variants(data: Data) -> str:
@@ -91,7 +91,7 @@ def variants(data: Data) -> str:
         f"best-validated (test, {TEST_EPISODES})",
     )
     body = [
-        (task, cmd, count(r["episodes"]), rate(test_win(r, "latest")), rate(test_win(r, "best")))
+        (task, cmd, count(r["episodes"]), rate(win_of(r, "latest")), rate(win_of(r, "best")))
         for task, cmd, r in rows
     ]
     return "\n".join([*table(head, body), "", measured(data, data.sources("variants"))])
@@ -106,8 +106,8 @@ def selfplay(data: Data) -> str:
             level = run["config"]["level"]
             lines.append(
                 f"Trained against `{opponents}`: {count(run['episodes'])} training episodes; "
-                f"tested against `{level}`: {rate(test_win(run, 'latest'))} final, "
-                f"{rate(test_win(run, 'best'))} best-validated."
+                f"tested against `{level}`: {rate(win_of(run, 'latest'))} final, "
+                f"{rate(win_of(run, 'best'))} best-validated."
             )
     return "\n".join([*lines, "", measured(data, data.sources("selfplay"))])
 
