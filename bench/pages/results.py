@@ -237,9 +237,6 @@ def benchmarl(data: Data) -> str:
     return "\n".join([*benchmarl_table(records), "", source])
 
 
-# --- benchmarks.md -----------------------------------------------------------------------
-
-
 def baselines_iqm(data: Data) -> str:
     """Every learner on one scale: per task, the IQM of its runs' test win rates with a 95 %
     bootstrap interval, and the probability of improvement between pairs."""
