@@ -43,18 +43,7 @@ from neuronsmae.protocol.errors import ClosedError
 from neuronsmae.protocol.levels import level_from_arg
 from neuronsmae.trainers.core.acting import Policy
 from neuronsmae.trainers.core.buffer import REPLAYS, Episode, ReplayMemoryError
-from neuronsmae.trainers.core.checkpoint import (
-    CHECKPOINT_NAME,
-    REPLAY_NAME,
-    CheckpointError,
-    Counters,
-    load_checkpoint,
-    load_replay,
-    policy_weights,
-    restore_rng,
-    save_checkpoint,
-    save_replay,
-)
+from neuronsmae.trainers.core.checkpoint import CHECKPOINT_NAME, Counters, restore_rng
 from neuronsmae.trainers.core.learner import (
     DeviceError,
     EnvSpec,
@@ -67,7 +56,7 @@ from neuronsmae.trainers.play.rollout import Request
 from neuronsmae.trainers.play.task import blue_view
 from neuronsmae.trainers.run import marl_eval
 from neuronsmae.trainers.run.competition import Competition
-from neuronsmae.trainers.run.config import ConfigError, TrainConfig, check_resumable, make_config
+from neuronsmae.trainers.run.config import ConfigError, TrainConfig
 from neuronsmae.trainers.run.config_groups import (
     TEST_SEED_OFFSET,
     WIN_RULES,
@@ -80,9 +69,12 @@ from neuronsmae.trainers.run.learning import Learning, make_learner
 from neuronsmae.trainers.run.placement import sampler_placement, start_ray
 from neuronsmae.trainers.run.records import Recorder, RunLock, check_new_run_dir, trim_records
 from neuronsmae.trainers.run.sampler import Sampler
-
-BEST_NAME = "best.pt"
-"""File name of the best-validated weights inside the run directory (checkpoint format)."""
+from neuronsmae.trainers.run.saving import (
+    RunSaver,
+    load_learner,
+    resumable,
+    saved_best,
+)
 
 log = logging.getLogger(__name__)
 
@@ -147,14 +139,11 @@ class Trainer:
         self.resumed_steps: int | None = None
         """A resumed run's env steps at its checkpoint (TensorBoard hides what came after)."""
         self.recorder: Recorder | None = None
-        self.replay_saved_at: int | None = None
-        """The episode count of the replay on disk (a checkpoint at the same count, e.g. the
-        finished one or one for new best weights, does not write it again)."""
         self.closed = False
         """Set by :meth:`close`: a trainer runs once."""
         self.lock = RunLock(self.run_dir)
         try:
-            saved = self._resumable() if resume else None
+            saved = resumable(self.run_dir, cfg) if resume else None
             if not resume:
                 check_new_run_dir(self.run_dir)
         except BaseException:
@@ -214,6 +203,8 @@ class Trainer:
             raise ConfigError(f"learner.buffer_size={cfg.learner.buffer_size}: {err}") from err
         self.learning = Learning(cfg.learner, self.learner, self.buffer, group, self.np_rng,
                                  cfg.seed)  # fmt: skip
+        self.saver = RunSaver(self.run_dir, cfg, self.env, self.spec)
+        """Writes the checkpoint, the replay and the best weights."""
 
     def _check_contexts(self, workers: bool = True) -> None:
         """Check every value the contexts can take against the protocol's table (before any
@@ -232,51 +223,17 @@ class Trainer:
         except InvalidContextError as err:
             raise ConfigError(f"contexts: {err}") from err
 
-    def _resumable(self) -> dict[str, Any]:
-        """The checkpoint to resume from, refused if its run has nothing left to do."""
-        payload = load_checkpoint(self.run_dir / CHECKPOINT_NAME)
-        check_resumable(make_config(payload["config"]), self.cfg)  # as neuronsmae-train does
-        done = payload["counters"]["episodes"]
-        if payload.get("finished") and done >= self.cfg.episodes:
-            raise ConfigError(
-                f"{self.run_dir} finished its {done} episodes and its final evaluation: "
-                f"raise --episodes above {done} to train it further"
-            )
-        return payload
-
     def _resume(self, payload: dict[str, Any]) -> None:
-        try:
-            self.learner.load_state_dict(payload["learner"])
-        except (RuntimeError, KeyError, ValueError) as err:  # torch's mismatch report
-            first = str(err).strip().splitlines()[0]
-            raise CheckpointError(
-                f"{self.run_dir / CHECKPOINT_NAME}: its networks do not fit this config "
-                f"({first}); a resumed run keeps the settings in "
-                "trainers.config.FIXED_ON_RESUME"
-            ) from err
+        load_learner(self.learner, payload, self.run_dir)
         self.counters = Counters(**payload["counters"])
         restore_rng(payload["rng"], self.np_rng)
-        unloaded = load_replay(self.run_dir / REPLAY_NAME, self.buffer, self.counters.episodes)
-        if unloaded:
-            log.warning("replay not restored (%s): it refills from empty", unloaded)
-        else:
-            self.replay_saved_at = self.counters.episodes
-            log.info("replay: %d items restored", len(self.buffer))
+        done = self.counters.episodes
+        self.saver.load_replay(self.buffer, done)
         if payload.get("starts") is not None:
             self.starts.load_state_dict(payload["starts"])
         self.competition.resume(payload.get("opponents"))
-        best = self.run_dir / BEST_NAME
-        done = self.counters.episodes
-        if self.cfg.eval.keep_best and best.is_file():
-            chosen = load_checkpoint(best)
-            if chosen["selection"]["episodes"] <= done:
-                self.best = (policy_weights(chosen["learner"]), chosen["selection"])
-            else:  # chosen in the stretch after the checkpoint, which is trained again
-                aside = best.with_name(f"{BEST_NAME}.after-checkpoint")
-                best.replace(aside)
-                at = chosen["selection"]["episodes"]
-                log.warning("%s was chosen at %d episodes, after the checkpoint's %d: moved to %s",
-                            best, at, done, aside.name)  # fmt: skip
+        if self.cfg.eval.keep_best:
+            self.best = saved_best(self.run_dir, done)
         dropped = trim_records(self.run_dir, done, redo_final=done >= self.cfg.episodes)
         log.info("resumed %s at %d episodes (%d record rows after the checkpoint dropped)",
                  self.run_dir, done, dropped)  # fmt: skip
@@ -509,30 +466,9 @@ class Trainer:
         if split == "validation" and cfg.eval.keep_best and better:
             self.best = (evaluated.weights, row)
             self.checkpoint()  # first: best.pt never runs ahead of the point a resume takes
-            self._save_best()
+            state = self.learning.state_dict()
+            self.saver.save_best(state, evaluated.weights, row, c, self.np_rng)
         return row
-
-    def _save_best(self) -> None:
-        """Write the best weights as a checkpoint-format file that the match command loads
-        (the learner's other state is the current one: resume from checkpoint.pt)."""
-        assert self.best is not None
-        state = self.learning.state_dict()
-        state["agent"] = {k: torch.as_tensor(v) for k, v in self.best[0].items()}
-        self._save(BEST_NAME, state, selection=self.best[1])
-
-    def _save(self, name: str, learner_state: dict[str, Any], **extra: Any) -> None:
-        """A checkpoint-format file ``<run_dir>/<name>``: the run's config, arena, spec,
-        counters and RNG with ``learner_state`` and ``extra``."""
-        save_checkpoint(
-            self.run_dir / name,
-            config=self.cfg.to_dict(),
-            env=self.env,
-            spec=self.spec,
-            learner_state=learner_state,
-            counters=self.counters,
-            np_rng=self.np_rng,
-            **extra,
-        )
 
     def _evaluate_best(self) -> dict[str, Any] | None:
         """The best-validated weights on the test seeds (None without ``keep_best``)."""
@@ -546,20 +482,15 @@ class Trainer:
         return {**row, "chosen_at_episodes": chosen["episodes"], "validation": chosen}
 
     def checkpoint(self, finished: bool = False) -> None:
-        """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``
-        (``finished``: after the final evaluation)."""
-        self._save(
-            CHECKPOINT_NAME,
-            self.learning.state_dict(),
-            starts=self.starts.state_dict(),
-            opponents=self.competition.state_dict(),
+        """Save the learner, counters and RNG states to ``<run_dir>/checkpoint.pt``, then the
+        replay (``finished``: after the final evaluation)."""
+        c, learning = self.counters, self.learning
+        self.saver.save(
+            CHECKPOINT_NAME, learning.state_dict(), c, self.np_rng,
+            starts=self.starts.state_dict(), opponents=self.competition.state_dict(),
             finished=finished,
-        )
-        episodes = self.counters.episodes
-        if self.cfg.eval.save_replay and self.replay_saved_at != episodes:  # after the checkpoint
-            with self.learning.buffer_lock:  # (a resume checks that the two counts match)
-                save_replay(self.run_dir / REPLAY_NAME, self.buffer, episodes)
-            self.replay_saved_at = episodes
+        )  # fmt: skip
+        self.saver.save_replay(self.buffer, c.episodes, learning.buffer_lock)
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, hook: Hook | None = None) -> dict[str, Any]:

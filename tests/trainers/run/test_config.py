@@ -247,7 +247,7 @@ def test_a_new_run_is_refused_a_directory_holding_another_run(
     appended its episodes to the same CSV files under the same episode numbers."""
     from neuronsmae.trainers.core.checkpoint import CHECKPOINT_NAME
     from neuronsmae.trainers.run.records import RUN_FILES, check_new_run_dir
-    from neuronsmae.trainers.run.train import BEST_NAME
+    from neuronsmae.trainers.run.saving import BEST_NAME
 
     assert {CHECKPOINT_NAME, BEST_NAME} <= set(RUN_FILES)
     check_new_run_dir(tmp_path / "absent")

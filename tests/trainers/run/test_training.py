@@ -176,20 +176,20 @@ def test_validation_and_test_seeds_are_disjoint_and_best_weights_are_tested(
         return run(requests)
 
     trainer.sampler.run = recording_run  # type: ignore[method-assign]
-    import neuronsmae.trainers.run.train as train_module
+    import neuronsmae.trainers.run.saving as saving
 
     saves: list[int] = []
-    real_save = train_module.save_replay
+    real_save = saving.save_replay
 
     def counted_save(path: Path, replay: object, episodes: int) -> None:
         saves.append(episodes)
         real_save(path, replay, episodes)
 
-    train_module.save_replay = counted_save  # type: ignore[assignment]
+    saving.save_replay = counted_save  # type: ignore[assignment]
     try:
         result = trainer.run()
     finally:
-        train_module.save_replay = real_save  # type: ignore[assignment]
+        saving.save_replay = real_save  # type: ignore[assignment]
     # best weights and the final checkpoint share counts with others: one replay write each
     assert saves == sorted(set(saves)) and saves[-1] == 6
     assert played["validation"] == {cfg.eval.eval_seed + k for k in range(3)}
