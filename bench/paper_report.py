@@ -185,7 +185,7 @@ def compute(records: list[dict[str, Any]], learner: str, cells: int) -> str:
     hours = sum(r["wall_minutes"] for r in done) / 60
     # Records written before the runs counted their sampled transitions say nothing of them.
     samples = (
-        f" on {sum(r['samples'] for r in done) / 1e6:.0f} million sampled transitions"
+        f" on {sum(r['samples'] for r in done) / 1e6:,.0f} million sampled transitions"
         if done and all("samples" in r for r in done)
         else ""
     )
