@@ -62,7 +62,7 @@ def test_report_lists_every_cell_marks_missing_seeds_and_counts_compute() -> Non
     assert own[("easy", "VDN")][4] == "0.900 (s1 0.900; 1 of 3 seeds)"
     compute = text.split("Compute:")[1]
     assert "paper: 4 of 29 runs recorded, 120,000 training episodes (5.9 million" in compute
-    assert "1,120,000 gradient updates on 2240 million sampled transitions, 2.0 h" in compute
+    assert "1,120,000 gradient updates on 2,240 million sampled transitions, 2.0 h" in compute
     assert "defaults: 1 of 9 runs recorded" in compute
     # A record written before runs counted their sampled transitions claims none of them.
     del records[-1]["samples"]
