@@ -228,7 +228,7 @@ def benchmarl(data: Data) -> str:
     commands = (
         [meta["command"]]
         if "command" in meta
-        else sorted({_command_pattern(r["command"]) for r in records if "command" in r})
+        else list(dict.fromkeys(_command_pattern(r["command"]) for r in records if "command" in r))
     )
     said = ", ".join(f"`{c}`" for c in commands) or "an unrecorded command"
     machine = meta.get("machine")

@@ -104,10 +104,10 @@ def test_benchmarl_renders_mean_interval_and_iqm_per_algorithm_and_task(tmp_path
     own.append({**own[0], "command": base + " --algorithms masac --seeds 1 --level random"})
     (root / "docs/data/benchmarl_baselines.json").write_text(json.dumps({"records": own}))
     said = render("results.md", root).split("Measured by ")[1]
-    assert said.startswith(
-        "`python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG --seeds SEED "
-        "--level random`, `python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG "
-        "--tasks TASK --seeds SEED` on "
+    assert said.startswith(  # in the records' order: the first command first
+        "`python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG --tasks TASK "
+        "--seeds SEED`, `python -m bench.benchmarl_baselines --minutes 30 --algorithms ALG "
+        "--seeds SEED --level random` on "
     )
 
 
