@@ -36,8 +36,9 @@ cores) or served ones. ``--set KEY=VALUE`` overrides any config key but those th
 the cell (``alg``, ``level``, ``seed``, ``out``; tests use it for tiny runs). Prints the
 table so far at the end (``--report``: only that, as Markdown: bench/paper_report.py).
 ``--test-at "coef=0.5"`` tests the recorded runs' final weights again with their test
-contexts so updated, on the same starts (their checkpoints must still be in ``--runs``),
-stores the results in the records and stops; the report then adds a table of them.
+contexts so updated (``level=...`` among them plays that bot instead of the run's), on the
+same starts (their checkpoints must still be in ``--runs``), stores the results and the
+contexts in the records and stops; the report then adds a table of them.
 """
 
 from __future__ import annotations
@@ -305,18 +306,21 @@ def test_at(args: argparse.Namespace, extra: str) -> int:
             )
         spec = saved["config"]["eval"]
         contexts = ContextSpec.parse(spec["eval_contexts"]).updated(more).value()
+        level = contexts.pop("level", rec["level"])  # a bot of --test-at's replaces the run's
         row = evaluate_checkpoint(
-            run_dir / CHECKPOINT_NAME, rec["level"], rec["test"]["main"]["episodes"],
+            run_dir / CHECKPOINT_NAME, level, rec["test"]["main"]["episodes"],
             spec["eval_seed"] + TEST_SEED_OFFSET, contexts=contexts,
         )  # fmt: skip
+        at = {"level": level, **contexts}
         table = load(args.out)  # the table's own runner may have added records meanwhile
         key = (rec["alg"], rec["level"], rec["seed"], rec["learner"])
         for line in table["records"]:
             if (line["alg"], line["level"], line["seed"], line["learner"]) == key:
                 line["test"][extra] = _figures(row)
+                line.setdefault("test_contexts", {})[extra] = at
         save(args.out, table)
         added += 1
-        print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {contexts}: {row['win_rate']:.3f}")
+        print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {at}: {row['win_rate']:.3f}")
     return added
 
 

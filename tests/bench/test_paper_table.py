@@ -68,8 +68,18 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     assert "0 record(s) tested" in capsys.readouterr().out
     (line,) = json.loads(out.read_text())["records"]
     assert line["test"]["coef=1.5"] == line["test"]["main"]
+    assert line["test_contexts"]["coef=1.5"] == line["test_contexts"]["main"]
+    # Another bot: the run's level gives way (it was overridden by the record's before).
+    assert main([*args, "--test-at", "level=random"]) == 0
+    (line,) = json.loads(out.read_text())["records"]
+    assert line["test_contexts"]["level=random"] == {
+        "level": "random",
+        "Friction_coeff": 0.5,
+        "coef": 1.5,
+    }
+    assert "at {'level': 'random'" in capsys.readouterr().out
     assert main([*args, "--report"]) == 0
-    head = "| level | alg | released rule, coef 1.5 | released rule, coef 1.5 |"
+    head = "| released rule, coef 1.5 | released rule, coef 1.5 | released rule, level random |"
     assert head in capsys.readouterr().out
 
 
