@@ -229,22 +229,25 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
 
 def _contexts(key: str) -> str:
     """A ``--test-at`` key as a header: ``coef=0.5;Friction_coeff=0.3`` → ``coef 0.5,
-    Friction_coeff 0.3``."""
-    return ", ".join(part.replace("=", " ") for part in key.split(";"))
+    Friction_coeff 0.3``; a bot as whom the runs play: ``level=1`` → ``against 1``."""
+    parts = (p.split("=", 1) for p in key.split(";"))
+    return ", ".join(f"against {v}" if k == "level" else f"{k} {v}" for k, v in parts)
 
 
 def retests(records: list[dict[str, Any]]) -> list[str]:
     """A table for the tests added by ``--test-at`` (none: no lines)."""
     done = [r for r in records if r["learner"] == "paper"]
-    extra = sorted({k for r in done for k in r["test"]} - {"main", "coef=1.0"})
+    tested = dict.fromkeys(k for r in done for k in r["test"])  # in the order tested
+    extra = [k for k in tested if k not in ("main", "coef=1.0")]
     if not extra:
         return []
     head = " | ".join(f"released rule, {_contexts(k)}" for k in extra)
     lines = [
         "",
         "The recorded runs' final weights tested again on the same 200 held-out episodes at "
-        "other contexts (`python -m bench.paper_table --test-at KEY=VALUE`; coef 0.5 is where "
-        "they trained):",
+        "other contexts or against other bots (`python -m bench.paper_table --test-at "
+        "KEY=VALUE`): each column changes only what it names in the run's test (coef 1.5, "
+        "its own bot); coef 0.5 is where they trained:",
         "",
         f"| level | alg | released rule, coef 1.5 | {head} |",
     ]

@@ -79,7 +79,7 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     }
     assert "at {'level': 'random'" in capsys.readouterr().out
     assert main([*args, "--report"]) == 0
-    head = "| released rule, coef 1.5 | released rule, coef 1.5 | released rule, level random |"
+    head = "| released rule, coef 1.5 | released rule, coef 1.5 | released rule, against random |"
     assert head in capsys.readouterr().out
 
 
