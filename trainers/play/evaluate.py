@@ -204,8 +204,9 @@ def evaluate_checkpoint(
 
     Episode ``k`` is reset with seed ``seed + k``, so two checkpoints evaluated with the same
     arguments meet exactly the same starts. ``contexts`` adds reset contexts (e.g.
-    ``{"coef": 1.5}``). ``envs`` arenas play at once (``env="remote"``: on a server at
-    ``port``, or a private one when None), with the options the run trained with. Returns
+    ``{"coef": 1.5}``; not ``level``, which is its own argument). ``envs`` arenas play at
+    once (``env="remote"``: on a server at ``port``, or a private one when None), with the
+    options the run trained with. Returns
     the rates of :func:`summarize` plus
     ``level``, ``seed``, ``checkpoint``, the run's ``alg`` and its training
     ``episodes_trained``.
@@ -221,7 +222,13 @@ def evaluate_checkpoint(
     episodes = count_option("episodes", episodes, 1)
     seed = check_series_seed(seed, episodes)
     envs = count_option("envs", envs, 1, MAX_ARENAS)
-    ctx = {**(plain_contexts(contexts) or {}), "level": chosen}
+    ctx = plain_contexts(contexts) or {}
+    if "level" in ctx:  # the bot is an argument of its own: one of the two would be ignored
+        raise InvalidContextError(
+            f"contexts: level={ctx['level']!r:.40} beside level={level!r:.40}; give the bot "
+            "as the level argument only"
+        )
+    ctx = {**ctx, "level": chosen}
     if env not in ENV_KINDS:
         raise InvalidOptionError(f"env must be one of {list(ENV_KINDS)}, got {env!r:.60}")
     if port is not None:

@@ -103,6 +103,16 @@ def test_a_checkpoint_is_evaluated_on_the_task_it_trained_on(tmp_path: Path) -> 
     assert result["mean_return"] in (-1.0, 0.0, 1.0, -0.5, 0.5)  # sparse: ±1 or 0 per episode
 
 
+def test_a_level_among_the_contexts_is_refused_not_overridden(tmp_path: Path) -> None:
+    """The level argument replaced a ``level`` context silently: a re-test against another
+    bot played the run's own."""
+    from neuronsmae.protocol.errors import InvalidContextError
+    from neuronsmae.trainers.play.evaluate import evaluate_checkpoint
+
+    with pytest.raises(InvalidContextError, match="level=0 beside level='easy'"):
+        evaluate_checkpoint(tmp_path / "x.pt", "easy", 1, 0, contexts={"level": 0})
+
+
 @pytest.mark.parametrize("level", ["2", 2, "medium", 1.5, True])
 def test_an_unknown_level_is_refused_before_anything_loads(level: object, tmp_path: Path) -> None:
     from neuronsmae.protocol.errors import InvalidContextError
