@@ -206,10 +206,15 @@ def free_port() -> int:
             return s.getsockname()[1]
 
 
+ARCHIVE_COMMIT = Path(__file__).resolve().parent / "ARCHIVE_COMMIT"
+"""Where ``git archive`` writes the archived commit (``export-subst`` in .gitattributes); in a
+checkout it holds the unexpanded placeholder."""
+
+
 def commit() -> str:
-    """The benchmarked code's commit: ``$NEURONSMAE_COMMIT`` (set for a ``git archive``
-    snapshot, which has no history) or the HEAD of the checkout this file is in, wherever
-    the command runs from; ``unknown`` outside any."""
+    """The benchmarked code's commit: ``$NEURONSMAE_COMMIT`` when set, else the HEAD of the
+    checkout this file is in, wherever the command runs from, else the commit a ``git
+    archive`` snapshot was made from (:data:`ARCHIVE_COMMIT`); ``unknown`` outside all."""
     if os.environ.get("NEURONSMAE_COMMIT"):
         return os.environ["NEURONSMAE_COMMIT"]
     try:
@@ -218,7 +223,12 @@ def commit() -> str:
                              check=True, timeout=10, cwd=here)  # fmt: skip
         return out.stdout.strip()
     except (OSError, subprocess.SubprocessError):
+        pass
+    try:
+        archived = ARCHIVE_COMMIT.read_text().strip()
+    except OSError:
         return "unknown"
+    return archived if archived and not archived.startswith("$Format") else "unknown"
 
 
 def machine() -> dict[str, Any]:

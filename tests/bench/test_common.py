@@ -158,6 +158,26 @@ def test_the_commit_is_the_checkout_s_wherever_the_command_runs(
     assert commit() == "abc123"
 
 
+def test_a_git_archive_snapshot_knows_its_commit(tmp_path: Path) -> None:
+    """``git archive`` expands bench/ARCHIVE_COMMIT (export-subst), so a snapshot run with no
+    history and no ``$NEURONSMAE_COMMIT`` still records the commit it was made from."""
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[2]
+    head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                          check=True, cwd=repo).stdout.strip()  # fmt: skip
+    archive = subprocess.run(["git", "archive", "HEAD", "bench"], capture_output=True,
+                             check=True, cwd=repo).stdout  # fmt: skip
+    subprocess.run(["tar", "-x", "-C", str(tmp_path)], input=archive, check=True)
+    env = {k: v for k, v in os.environ.items() if k != "NEURONSMAE_COMMIT"}
+    env["GIT_CEILING_DIRECTORIES"] = str(tmp_path.parent)  # no checkout above the snapshot
+    code = "from bench.common import commit; print(commit())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=tmp_path, env=env)  # fmt: skip
+    assert out.stdout.strip() == head
+
+
 def test_the_snapshot_reads_the_calling_thread_to_the_microsecond() -> None:
     """The scheduler refreshes a running thread's schedstat only at its next tick: read
     there, the thread taking the snapshot lagged by up to a tick (1-3 % of a round)."""
