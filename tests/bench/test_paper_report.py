@@ -82,6 +82,24 @@ def test_report_says_whether_the_papers_orderings_hold() -> None:
     assert "- QMIX: easy, middle, hard 0.800, 0.700, 0.750: easy > middle > hard does not" in text
     assert "- easy: VDN 0.900, QMIX 0.800, IQL 0.500: VDN ≥ QMIX > IQL holds" in text
     assert "- hard: VDN 0.400, QMIX 0.750, IQL 0.200: VDN ≥ QMIX > IQL does not hold" in text
+    assert "at the training context" not in text  # no run re-tested at coef 0.5 yet
+
+
+def test_report_says_whether_the_orderings_hold_at_the_training_context() -> None:
+    """The re-tests at coef 0.5 (``--test-at coef=0.5``) get the orderings of their own,
+    from their own means, beside those of the released test (coef 1.5)."""
+    at_15 = {"iql": 0.285, "vdn": 0.235, "qmix": 0.04}
+    at_05 = {"iql": 0.99, "vdn": 0.935, "qmix": 0.99}
+    records = []
+    for alg in at_15:
+        rec = _record(alg, "easy", 1, 2 * at_15[alg])
+        rec["test"]["coef=0.5"] = {"released_win_rate": at_05[alg], "win_rate": at_05[alg]}
+        records.append(rec)
+    text = report({"records": records})
+    released, trained = text.split("at the training context")
+    assert "- easy: VDN 0.235, QMIX 0.040, IQL 0.285: VDN ≥ QMIX > IQL does not hold" in released
+    assert "- easy: VDN 0.935, QMIX 0.990, IQL 0.990: VDN ≥ QMIX > IQL does not hold" in trained
+    assert "easy > middle > hard" not in text  # one level recorded: no level ordering
 
 
 def test_main_counts_the_seeds_recorded_beside_those_asked_for(
