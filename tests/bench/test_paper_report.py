@@ -197,3 +197,21 @@ def test_the_dr_coef_variant_trains_the_paper_preset_at_the_released_coef_list(
     assert cfg.contexts == DR_COEF_CONTEXTS == "Friction_coeff=0.5;coef=0.5,0.7,1,1.4,1.7,2"
     assert plain.contexts == "Friction_coeff=0.5;coef=0.5"
     assert cfg.eval == plain.eval and cfg.learner == plain.learner  # tested and learned alike
+
+
+def test_the_like_for_like_row_expects_one_seed_a_level() -> None:
+    """#42's like-for-like row (the project's VDN trained at the released contexts, tested
+    as released) is one seed per level: a recorded seed is not "1 of 3", and its compute
+    counts 3 runs, not 9."""
+    like = _record("vdn", "easy", 1, 0.0, "defaults_released")
+    like["test"]["main"] = {"released_win_rate": 0.61, "win_rate": 0.61}
+    records = [_record("vdn", "easy", s, 0.9, "defaults") for s in (1, 2)] + [like]
+    text = report({"records": records})
+    row = _rows(text.split("This project's learner")[1])[("easy", "VDN")]
+    assert row[4].endswith("2 of 3 seeds)")  # its own contexts: three seeds a level
+    assert row[6] == "0.610 (s1 0.610)"
+    assert "- defaults_released: 1 of 3 runs recorded" in text
+    assert "- defaults: 2 of 9 runs recorded" in text
+    second = dict(like, seed=2)  # a second seed recorded: two expected a level
+    text = report({"records": [*records, second]})
+    assert "- defaults_released: 2 of 6 runs recorded" in text
