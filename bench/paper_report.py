@@ -37,6 +37,8 @@ TEST_FIELDS = ("win_rate", "draw_rate", "loss_rate", "released_win_rate", "mean_
 """What a record keeps of each test, beside its episode count."""
 RELEASED_TEST = "main"
 """The paper preset's main test: coef 1.5 (the released ``coef_ts``)."""
+TRAINED_TEST = "coef=0.5"
+"""The re-test at the paper preset's training context (``--test-at coef=0.5``)."""
 
 
 def interval(rates: Sequence[float]) -> tuple[float, float | None]:
@@ -108,7 +110,7 @@ def paper_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
     return lines
 
 
-def project_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
+def project_table(records: list[dict[str, Any]], seeds: int, like_seeds: int) -> list[str]:
     """This project's learner (VDN by default): at its own contexts (μ 0.1) tested at coef
     1.0 and 1.5 by the referee, and like for like with the released experiment."""
     lines = [
@@ -117,7 +119,6 @@ def project_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
         "|---|---|---|---|---|---|",
     ]
     algs = [a for a in ALGS if any(r["alg"] == a and r["learner"] in PROJECT for r in records)]
-    like_seeds = _like_for_like_seeds(records)
     for level in LEVELS:
         for alg in algs:
             own = runs_of(records, alg, level, "defaults")
@@ -169,10 +170,6 @@ def dr_table(records: list[dict[str, Any]], seeds: int) -> list[str]:
     return lines
 
 
-TRAINED_TEST = "coef=0.5"
-"""The re-test at the paper preset's training context (``--test-at coef=0.5``)."""
-
-
 def shape(records: list[dict[str, Any]], test: str = RELEASED_TEST) -> list[str]:
     """Whether the paper's orderings hold in the paper preset's means of one test (released
     rule; by default the main test, coef 1.5): easy > middle > hard for each algorithm, VDN
@@ -219,6 +216,7 @@ def compute(records: list[dict[str, Any]], learner: str, cells: int) -> str:
 def report(table: dict[str, Any], seeds: int = 3) -> str:
     """The whole report as Markdown (see the module docstring)."""
     records = table["records"]
+    like = _like_for_like_seeds(records)
     lines = ["`--preset paper` (the released learner), 200 held-out episodes per test:", ""]
     lines += paper_table(records, seeds)
     order = shape(records)
@@ -236,13 +234,12 @@ def report(table: dict[str, Any], seeds: int = 3) -> str:
         lines += dr_table(records, seeds)
     if any(r["learner"] in PROJECT for r in records):
         lines += ["", "This project's learner, 30 minutes a run:", ""]
-        lines += project_table(records, seeds)
+        lines += project_table(records, seeds, like)
     lines += ["", "Compute:", ""]
     # the paper's nine cells per seed, and the released levels once each (the issue's
     # one seed; bench.paper_table runs them only when asked, --levels 0 1)
     cells = len(LEVELS) * len(ALGS) * seeds + len(RELEASED)
     lines.append("- " + compute(records, "paper", cells))
-    like = _like_for_like_seeds(records)
     for learner, per_cell in (("defaults", seeds), ("defaults_released", like)):
         if any(r["learner"] == learner for r in records):
             lines.append("- " + compute(records, learner, len(LEVELS) * per_cell))

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -161,9 +163,6 @@ def test_the_commit_is_the_checkout_s_wherever_the_command_runs(
 def test_a_git_archive_snapshot_knows_its_commit(tmp_path: Path) -> None:
     """``git archive`` expands bench/ARCHIVE_COMMIT (export-subst), so a snapshot run with no
     history and no ``$NEURONSMAE_COMMIT`` still records the commit it was made from."""
-    import subprocess
-    import sys
-
     repo = Path(__file__).resolve().parents[2]
     head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
                           check=True, cwd=repo).stdout.strip()  # fmt: skip
