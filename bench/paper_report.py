@@ -256,11 +256,22 @@ def _contexts(key: str) -> str:
     return ", ".join(f"against {v}" if k == "level" else f"{k} {v}" for k, v in parts)
 
 
+def _column_order(key: str) -> tuple[int, int]:
+    """Where a ``--test-at`` column stands: contexts first, in the order tested (a stable
+    sort), then the bots from the weakest, ``0``, ``1``, ``easy``, ``middle``, ``hard``,
+    whatever order their re-tests ran in; other bots last."""
+    if not key.startswith("level="):
+        return (0, 0)
+    bots = (*RELEASED, *LEVELS)
+    bot = key.removeprefix("level=")
+    return (1, bots.index(bot) if bot in bots else len(bots))
+
+
 def retests(records: list[dict[str, Any]]) -> list[str]:
     """A table for the tests added by ``--test-at`` (none: no lines)."""
     done = [r for r in records if r["learner"] == "paper"]
     tested = dict.fromkeys(k for r in done for k in r["test"])  # in the order tested
-    extra = [k for k in tested if k not in ("main", "coef=1.0")]
+    extra = sorted((k for k in tested if k not in ("main", "coef=1.0")), key=_column_order)
     if not extra:
         return []
     head = " | ".join(f"released rule, {_contexts(k)}" for k in extra)

@@ -124,8 +124,14 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
     assert row.split("|")[4].strip() == "1.000 (s1 1.000; 1 of 2 seeds)"  # s2 not yet
     assert lines[-1].startswith("| 1 | VDN | — | — |")
     records[1]["test"]["level=1"] = {"released_win_rate": 0.1}  # another bot, tested later
-    head += " released rule, against 1 |"  # a column in the order tested, named by its bot
+    head += " released rule, against 1 |"  # a column named by its bot
     assert head in report({"records": records}).splitlines()
+    records[1]["test"]["level=hard"] = {"released_win_rate": 0.0}
+    records[0]["test"]["level=easy"] = {"released_win_rate": 0.7}  # tested after hard
+    records[0]["test"]["coef=1.4"] = {"released_win_rate": 0.5}  # a context, tested last
+    head = head.replace(" released rule, against 1 |", " released rule, coef 1.4 |")
+    head += " released rule, against 1 | released rule, against easy |"
+    assert head + " released rule, against hard |" in report({"records": records}).splitlines()
 
 
 @pytest.mark.parametrize("key", ["seed=7", "alg=qmix", "level=hard", "out=elsewhere"])
