@@ -284,44 +284,59 @@ def test_at(args: argparse.Namespace, extra: str) -> int:
     starts and as many episodes; stored in the record's ``test`` under ``extra``.
 
     Needs each run's checkpoint (the record's ``run_dir``, else ``--runs``), and refuses
-    one whose episode count is not the record's: that would not be the final weights.
-    Returns how many records were added to.
+    one whose episode count is not the record's: that would not be the final weights. Where
+    ``extra`` changes nothing of the run's own test (``level=easy`` for a run trained and
+    tested against easy), that test is the main one, and its figures are copied without a
+    checkpoint. Returns how many records were added to.
     """
     more = ContextSpec.parse(extra)
     added = 0
     for rec in load(args.out)["records"]:
         if rec["learner"] != args.learner or extra in rec["test"]:
             continue
-        run_dir = Path(rec["run_dir"])
-        if not (run_dir / CHECKPOINT_NAME).is_file():
-            run_dir = args.runs / rec["learner"] / f"{rec['alg']}_{rec['level']}_s{rec['seed']}"
-        if not (run_dir / CHECKPOINT_NAME).is_file():
-            print(f"no checkpoint for {rec['alg']}/{rec['level']}/s{rec['seed']}: skipped")
+        tested = _retest(args, rec, more)
+        if tested is None:
             continue
-        saved = load_checkpoint(run_dir)
-        if saved["counters"]["episodes"] != rec["episodes"]:
-            raise ValueError(
-                f"{run_dir / CHECKPOINT_NAME} holds {saved['counters']['episodes']} episodes, "
-                f"the record {rec['episodes']}: not the recorded final weights"
-            )
-        spec = saved["config"]["eval"]
-        contexts = ContextSpec.parse(spec["eval_contexts"]).updated(more).value()
-        level = contexts.pop("level", rec["level"])  # a bot of --test-at's replaces the run's
-        row = evaluate_checkpoint(
-            run_dir / CHECKPOINT_NAME, level, rec["test"]["main"]["episodes"],
-            spec["eval_seed"] + TEST_SEED_OFFSET, contexts=contexts,
-        )  # fmt: skip
-        at = {"level": level, **contexts}
+        figures, at = tested
         table = load(args.out)  # the table's own runner may have added records meanwhile
         key = (rec["alg"], rec["level"], rec["seed"], rec["learner"])
         for line in table["records"]:
             if (line["alg"], line["level"], line["seed"], line["learner"]) == key:
-                line["test"][extra] = _figures(row)
+                line["test"][extra] = figures
                 line.setdefault("test_contexts", {})[extra] = at
         save(args.out, table)
         added += 1
-        print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {at}: {row['win_rate']:.3f}")
+        print(f"{rec['alg']}/{rec['level']}/s{rec['seed']} at {at}: {figures['win_rate']:.3f}")
     return added
+
+
+def _retest(
+    args: argparse.Namespace, rec: dict[str, Any], more: ContextSpec
+) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """One record's figures and contexts under ``more``; ``None`` without its checkpoint."""
+    own = rec.get("test_contexts", {}).get("main")
+    if own is not None and all(own.get(k) == v for k, v in more.value().items()):
+        return dict(rec["test"]["main"]), dict(own)  # the same test: the main one
+    run_dir = Path(rec["run_dir"])
+    if not (run_dir / CHECKPOINT_NAME).is_file():
+        run_dir = args.runs / rec["learner"] / f"{rec['alg']}_{rec['level']}_s{rec['seed']}"
+    if not (run_dir / CHECKPOINT_NAME).is_file():
+        print(f"no checkpoint for {rec['alg']}/{rec['level']}/s{rec['seed']}: skipped")
+        return None
+    saved = load_checkpoint(run_dir)
+    if saved["counters"]["episodes"] != rec["episodes"]:
+        raise ValueError(
+            f"{run_dir / CHECKPOINT_NAME} holds {saved['counters']['episodes']} episodes, "
+            f"the record {rec['episodes']}: not the recorded final weights"
+        )
+    spec = saved["config"]["eval"]
+    contexts = ContextSpec.parse(spec["eval_contexts"]).updated(more).value()
+    level = contexts.pop("level", rec["level"])  # a bot of --test-at's replaces the run's
+    row = evaluate_checkpoint(
+        run_dir / CHECKPOINT_NAME, level, rec["test"]["main"]["episodes"],
+        spec["eval_seed"] + TEST_SEED_OFFSET, contexts=contexts,
+    )  # fmt: skip
+    return _figures(row), {"level": level, **contexts}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -134,6 +134,27 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
     assert head + " released rule, against hard |" in report({"records": records}).splitlines()
 
 
+def test_a_retest_against_the_runs_own_bot_is_its_main_test_and_needs_no_checkpoint(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The easy runs of 2026-11-28 lost their checkpoints with the machine; `--test-at
+    # level=easy` skipped them, and their "against easy" column read "—" beside the figure.
+    line = _record("vdn", "easy", 1, 0.6)
+    line["run_dir"] = str(tmp_path / "gone")
+    main_contexts = {"level": "easy", "Friction_coeff": 0.5, "coef": 1.5}
+    line["test_contexts"] = {"main": main_contexts}
+    out = tmp_path / "table.json"
+    out.write_text(json.dumps({"records": [line]}))
+    args = ["--out", str(out), "--runs", str(tmp_path / "runs")]
+    assert main([*args, "--test-at", "level=easy;coef=1.5"]) == 0
+    assert "1 record(s) tested" in capsys.readouterr().out
+    (line,) = json.loads(out.read_text())["records"]
+    assert line["test"]["level=easy;coef=1.5"] == line["test"]["main"]
+    assert line["test_contexts"]["level=easy;coef=1.5"] == main_contexts
+    assert main([*args, "--test-at", "level=hard"]) == 0  # another bot: the weights needed
+    assert "no checkpoint for vdn/easy/s1: skipped" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("key", ["seed=7", "alg=qmix", "level=hard", "out=elsewhere"])
 def test_set_cannot_change_what_names_a_cell(
     key: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
