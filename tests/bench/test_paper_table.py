@@ -62,7 +62,7 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
     assert main(args) == 0  # already recorded: skipped, nothing added
     assert len(json.loads(out.read_text())["records"]) == 1
     assert "| hard | QMIX | 0.34 | 0." in capsys.readouterr().out  # the table, the run in it
-    # Tested again at its own test contexts: the same starts and weights, the same figures.
+    # Tested again at its own test contexts: that is the main test, its figures copied.
     assert main([*args, "--test-at", "coef=1.5"]) == 0
     assert main([*args, "--test-at", "coef=1.5"]) == 0  # already there: not tested again
     assert "0 record(s) tested" in capsys.readouterr().out
@@ -78,6 +78,11 @@ def test_the_table_resumes_a_stopped_run_records_it_and_skips_it_next_time(
         "coef": 1.5,
     }
     assert "at {'level': 'random'" in capsys.readouterr().out
+    # Tested again from the checkpoint: the same starts and weights, the same figures.
+    first = line["test"].pop("level=random")
+    out.write_text(json.dumps({"records": [line]}))
+    assert main([*args, "--test-at", "level=random"]) == 0
+    assert json.loads(out.read_text())["records"][0]["test"]["level=random"] == first
     assert main([*args, "--report"]) == 0
     head = "| released rule, coef 1.5 | released rule, coef 1.5 | released rule, against random |"
     assert head in capsys.readouterr().out
