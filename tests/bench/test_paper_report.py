@@ -137,8 +137,8 @@ def test_tests_added_later_get_their_own_table_and_none_without_them() -> None:
 def test_a_retest_against_the_runs_own_bot_is_its_main_test_and_needs_no_checkpoint(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # The easy runs of 2026-11-28 lost their checkpoints with the machine; `--test-at
-    # level=easy` skipped them, and their "against easy" column read "—" beside the figure.
+    # A run whose checkpoint is gone: against its own bot, at its own contexts, the re-test
+    # is its main test; anything else needs the weights and is skipped.
     line = _record("vdn", "easy", 1, 0.6)
     line["run_dir"] = str(tmp_path / "gone")
     main_contexts = {"level": "easy", "Friction_coeff": 0.5, "coef": 1.5}
